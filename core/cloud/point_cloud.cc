@@ -6,9 +6,9 @@ namespace rpsr::core {
 
 absl::Status ValidatePointCloud(const PointCloud& cloud) {
   if (!cloud.intensities.empty() && cloud.intensities.size() != cloud.points.size()) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("point cloud has ", cloud.points.size(), " points but ",
-                     cloud.intensities.size(), " intensities; give one per point or none"));
+    return absl::InvalidArgumentError(absl::StrCat("point cloud has ", cloud.points.size(),
+                                                   " points but ", cloud.intensities.size(),
+                                                   " intensities; give one per point or none"));
   }
   for (size_t i = 0; i < cloud.points.size(); ++i) {
     const Eigen::Vector3f& p = cloud.points[i];
