@@ -40,7 +40,7 @@ absl::StatusOr<std::string> ReadFileBytes(const std::string& path, size_t max_by
   return bytes;
 }
 
-absl::Status WriteFileBytes(const std::string& path, std::string_view bytes) {
+absl::Status WriteFileBytes(const std::string& path, absl::string_view bytes) {
   const std::string temporary = absl::StrCat(path, ".tmp-rpsr");
   {
     std::ofstream out(temporary, std::ios::binary | std::ios::trunc);

@@ -4,10 +4,10 @@
 
 #include <cstddef>
 #include <string>
-#include <string_view>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
 
 namespace rpsr::core {
 
@@ -23,7 +23,7 @@ absl::StatusOr<std::string> ReadFileBytes(const std::string& path,
 
 // Writes `bytes` to `path` through a temporary file in the same folder and a rename, so that a
 // reader never sees a half-written file and a failed write loses nothing that was there.
-absl::Status WriteFileBytes(const std::string& path, std::string_view bytes);
+absl::Status WriteFileBytes(const std::string& path, absl::string_view bytes);
 
 }  // namespace rpsr::core
 

@@ -16,7 +16,7 @@ namespace {
 constexpr size_t kRecordBytes = 4 * sizeof(float);
 }  // namespace
 
-absl::StatusOr<PointCloud> ParseKittiBin(std::string_view bytes, std::string_view name) {
+absl::StatusOr<PointCloud> ParseKittiBin(absl::string_view bytes, absl::string_view name) {
   if (bytes.size() % kRecordBytes != 0) {
     return absl::InvalidArgumentError(
         absl::StrCat(name, ": ", bytes.size(),

@@ -4,10 +4,10 @@
 #define RPSR_CORE_IO_KITTI_BIN_H_
 
 #include <string>
-#include <string_view>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
 #include "core/cloud/point_cloud.h"
 
 namespace rpsr::core {
@@ -15,7 +15,7 @@ namespace rpsr::core {
 // Parses the bytes of a .bin scan; `name` labels errors (usually the path). Reflectance goes
 // to `intensities`. Errors (InvalidArgument): a size that is not a multiple of 16 bytes, or a
 // non-finite coordinate (named by record index).
-absl::StatusOr<PointCloud> ParseKittiBin(std::string_view bytes, std::string_view name);
+absl::StatusOr<PointCloud> ParseKittiBin(absl::string_view bytes, absl::string_view name);
 
 // Reads a .bin scan from disk (NotFound / PermissionDenied when it cannot be opened).
 absl::StatusOr<PointCloud> ReadKittiBin(const std::string& path);
