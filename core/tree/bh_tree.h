@@ -58,7 +58,7 @@ struct BarnesHutTreeOptions {
   int max_depth = 6;
   // Neighbour tables are built for depths 0 .. min(neighbor_max_depth, max_depth) only: they cost
   // 4 * 3^D bytes a node and only the tree convolutions (depths <= 5) gather neighbours.
-  int neighbor_max_depth = 6;
+  int neighbor_max_depth = 5;
   // Clouds with more points are rejected (InvalidArgument) instead of building a huge tree.
   size_t max_points = 20'000'000;
 };

@@ -196,7 +196,9 @@ TYPED_TEST(BarnesHutTreePropertyTest, NeighborsMatchBruteForceAndAreSymmetric) {
   using Tree = BarnesHutTree<D>;
   for (CloudKind kind : {CloudKind::kUniform, CloudKind::kClusters}) {
     const Points<D> points = MakeCloud<D>(kind, 2500, 5);
-    auto tree = BuildBarnesHutTree<D>(absl::MakeConstSpan(points));
+    BarnesHutTreeOptions options;
+    options.neighbor_max_depth = 6;
+    auto tree = BuildBarnesHutTree<D>(absl::MakeConstSpan(points), options);
     ASSERT_TRUE(tree.ok()) << tree.status();
     ASSERT_EQ(tree->neighbor_max_depth(), 6);
     for (int depth = 0; depth <= tree->neighbor_max_depth(); ++depth) {
