@@ -113,6 +113,7 @@ class BarnesHutTreeBuilder {
   }
 
   static absl::StatusOr<Tree> Build(absl::Span<const Vector> points,
+                                    absl::Span<const uint32_t> weights,
                                     const BarnesHutTreeOptions& options) {
     if (options.max_depth < 0 || options.max_depth > kMaxMortonDepth<D>) {
       return absl::InvalidArgumentError(absl::StrCat("tree max_depth ", options.max_depth,
@@ -129,6 +130,16 @@ class BarnesHutTreeBuilder {
                                                      " points, more than the limit of ", max_points,
                                                      "; downsample it first"));
     }
+    if (!weights.empty() && weights.size() != points.size()) {
+      return absl::InvalidArgumentError(absl::StrCat("tree build got ", weights.size(),
+                                                     " weights for ", points.size(), " points"));
+    }
+    uint64_t total_weight = weights.empty() ? points.size() : 0;
+    for (uint32_t w : weights) total_weight += w;
+    if (total_weight == 0 || total_weight > std::numeric_limits<uint32_t>::max()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("tree build: total point weight ", total_weight, " is outside 1..2^32-1"));
+    }
     Eigen::AlignedBox<double, D> box;
     for (size_t i = 0; i < points.size(); ++i) {
       if (!points[i].allFinite()) {
@@ -139,13 +150,20 @@ class BarnesHutTreeBuilder {
     }
 
     Tree tree;
-    tree.num_points_ = points.size();
-    const VectorD center = box.center();
-    const double largest_half_extent = 0.5 * (box.max() - box.min()).maxCoeff();
+    tree.num_points_ = total_weight;
+    VectorD center = box.center();
     // The relative margin keeps the farthest points strictly inside the top cell; the floor gives
     // a single point (or a cloud of duplicates) a cube instead of a division by zero.
-    const double half_length = std::max(largest_half_extent * (1.0 + 1e-6),
-                                        1e-6 * std::max(1.0, center.cwiseAbs().maxCoeff()));
+    double half_length = std::max(0.5 * (box.max() - box.min()).maxCoeff() * (1.0 + 1e-6),
+                                  1e-6 * std::max(1.0, center.cwiseAbs().maxCoeff()));
+    if (options.cube_half_length > 0.0) {
+      if (options.cube_center.size() != D || !std::isfinite(options.cube_half_length)) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("tree build: a given cube needs ", D, " finite centre coordinates"));
+      }
+      for (int a = 0; a < D; ++a) center[a] = options.cube_center[a];
+      half_length = options.cube_half_length;
+    }
     tree.center_ = center;
     tree.half_length_ = half_length;
 
@@ -194,10 +212,11 @@ class BarnesHutTreeBuilder {
       do {
         double p[D];
         for (int a = 0; a < D; ++a) p[a] = static_cast<double>(points[order[i]][a]) - center[a];
-        ++count;
-        for (int a = 0; a < D; ++a) sum[a] += p[a];
+        const uint32_t w = weights.empty() ? 1 : weights[order[i]];
+        count += w;
+        for (int a = 0; a < D; ++a) sum[a] += w * p[a];
         for (int r = 0, k = 0; r < D; ++r) {
-          for (int c = r; c < D; ++c, ++k) sum_sq[k] += p[r] * p[c];
+          for (int c = r; c < D; ++c, ++k) sum_sq[k] += w * p[r] * p[c];
         }
         ++i;
       } while (i < n && codes[i] == code);
@@ -315,7 +334,14 @@ class BarnesHutTreeBuilder {
 template <int D>
 absl::StatusOr<BarnesHutTree<D>> BuildBarnesHutTree(
     absl::Span<const Eigen::Matrix<float, D, 1>> points, const BarnesHutTreeOptions& options) {
-  return BarnesHutTreeBuilder<D>::Build(points, options);
+  return BarnesHutTreeBuilder<D>::Build(points, {}, options);
+}
+
+template <int D>
+absl::StatusOr<BarnesHutTree<D>> BuildWeightedBarnesHutTree(
+    absl::Span<const Eigen::Matrix<float, D, 1>> points, absl::Span<const uint32_t> weights,
+    const BarnesHutTreeOptions& options) {
+  return BarnesHutTreeBuilder<D>::Build(points, weights, options);
 }
 
 absl::StatusOr<Octree> BuildOctree(const PointCloud& cloud, const BarnesHutTreeOptions& options) {
@@ -395,5 +421,11 @@ template absl::StatusOr<BarnesHutTree<2>> BuildBarnesHutTree<2>(
     absl::Span<const Eigen::Matrix<float, 2, 1>>, const BarnesHutTreeOptions&);
 template absl::StatusOr<BarnesHutTree<3>> BuildBarnesHutTree<3>(
     absl::Span<const Eigen::Matrix<float, 3, 1>>, const BarnesHutTreeOptions&);
+template absl::StatusOr<BarnesHutTree<2>> BuildWeightedBarnesHutTree<2>(
+    absl::Span<const Eigen::Matrix<float, 2, 1>>, absl::Span<const uint32_t>,
+    const BarnesHutTreeOptions&);
+template absl::StatusOr<BarnesHutTree<3>> BuildWeightedBarnesHutTree<3>(
+    absl::Span<const Eigen::Matrix<float, 3, 1>>, absl::Span<const uint32_t>,
+    const BarnesHutTreeOptions&);
 
 }  // namespace rpsr::core

@@ -61,6 +61,11 @@ struct BarnesHutTreeOptions {
   int neighbor_max_depth = 5;
   // Clouds with more points are rejected (InvalidArgument) instead of building a huge tree.
   size_t max_points = 20'000'000;
+  // A given root cube instead of the cloud's own (cube_half_length > 0; cube_center has D
+  // entries). Used to bin a moved cloud into a partner's cells; points outside the cube are
+  // counted in the border cells they are clamped to (their centre of mass stays true).
+  std::vector<double> cube_center;
+  double cube_half_length = 0.0;
 };
 
 template <int D>
@@ -97,6 +102,7 @@ class BarnesHutTree {
 
   int max_depth() const { return static_cast<int>(levels_.size()) - 1; }
   int neighbor_max_depth() const { return neighbor_max_depth_; }
+  // Points in the tree (the total weight for a weighted build).
   size_t num_points() const { return num_points_; }
   const Level& level(int depth) const { return levels_[depth]; }
   const std::vector<Level>& levels() const { return levels_; }
@@ -155,6 +161,13 @@ using Quadtree = BarnesHutTree<2>;
 template <int D>
 absl::StatusOr<BarnesHutTree<D>> BuildBarnesHutTree(
     absl::Span<const Eigen::Matrix<float, D, 1>> points, const BarnesHutTreeOptions& options = {});
+
+// The same for weighted points (weight = how many points each stands for, e.g. the counts of
+// another tree's nodes): counts and moments are weighted sums. `weights` empty means all 1.
+template <int D>
+absl::StatusOr<BarnesHutTree<D>> BuildWeightedBarnesHutTree(
+    absl::Span<const Eigen::Matrix<float, D, 1>> points, absl::Span<const uint32_t> weights,
+    const BarnesHutTreeOptions& options = {});
 
 // Convenience for 3D clouds.
 absl::StatusOr<Octree> BuildOctree(const PointCloud& cloud,

@@ -348,6 +348,52 @@ TEST(BarnesHutTreeTest, RejectsBadInputWithClearMessages) {
   EXPECT_THAT(BuildOctree(cloud, options).status().message(), HasSubstr("limit of 1"));
 }
 
+TEST(BarnesHutTreeTest, WeightedBuildEqualsDuplicatedPoints) {
+  const Points<3> points = MakeCloud<3>(CloudKind::kClusters, 400, 14);
+  std::vector<uint32_t> weights;
+  Points<3> duplicated;
+  for (size_t i = 0; i < points.size(); ++i) {
+    weights.push_back(1 + i % 4);
+    for (uint32_t k = 0; k < weights.back(); ++k) duplicated.push_back(points[i]);
+  }
+  auto weighted = BuildWeightedBarnesHutTree<3>(absl::MakeConstSpan(points), weights);
+  auto plain = BuildBarnesHutTree<3>(absl::MakeConstSpan(duplicated));
+  ASSERT_TRUE(weighted.ok() && plain.ok());
+  EXPECT_EQ(weighted->num_points(), duplicated.size());
+  for (int depth = 0; depth <= plain->max_depth(); ++depth) {
+    ASSERT_EQ(weighted->level(depth).morton, plain->level(depth).morton);
+    ASSERT_EQ(weighted->level(depth).count, plain->level(depth).count);
+    for (size_t i = 0; i < plain->level(depth).size(); ++i) {
+      EXPECT_LT(
+          (weighted->level(depth).center_of_mass[i] - plain->level(depth).center_of_mass[i]).norm(),
+          1e-4f);
+      EXPECT_LT((weighted->Covariance(depth, i) - plain->Covariance(depth, i)).norm(), 1e-3f);
+    }
+  }
+  weights.pop_back();
+  EXPECT_FALSE(BuildWeightedBarnesHutTree<3>(absl::MakeConstSpan(points), weights).ok());
+}
+
+TEST(BarnesHutTreeTest, GivenCubeIsUsedAndOutsidePointsClampToBorderCells) {
+  PointCloud cloud;
+  cloud.points = {{0.5f, 0.5f, 0.5f}, {-0.5f, -0.5f, -0.5f}, {3.0f, 0.0f, 0.0f}};
+  BarnesHutTreeOptions options;
+  options.max_depth = 2;
+  options.cube_center = {0.0, 0.0, 0.0};
+  options.cube_half_length = 1.0;
+  auto tree = BuildOctree(cloud, options);
+  ASSERT_TRUE(tree.ok()) << tree.status();
+  EXPECT_EQ(tree->half_length(), 1.0);
+  EXPECT_EQ(tree->CellOfPoint(cloud.points[0], 2), (std::array<uint32_t, 3>{2, 2, 2}));
+  // (3, 0, 0) lies outside: clamped to x cell 3, its centre of mass stays true.
+  EXPECT_EQ(tree->CellOfPoint(cloud.points[2], 2), (std::array<uint32_t, 3>{3, 2, 2}));
+  const auto& level = tree->level(2);
+  ASSERT_EQ(level.size(), 3u);
+  EXPECT_TRUE(level.center_of_mass.back().isApprox(cloud.points[2]));
+  options.cube_center = {0.0};
+  EXPECT_FALSE(BuildOctree(cloud, options).ok());
+}
+
 TEST(BarnesHutTreeTest, QuadtreeSupportsDeepTrees) {
   const Points<2> points = MakeCloud<2>(CloudKind::kUniform, 100, 13);
   BarnesHutTreeOptions options;
