@@ -376,7 +376,7 @@ TEST(BarnesHutTreeTest, WeightedBuildEqualsDuplicatedPoints) {
 
 TEST(BarnesHutTreeTest, GivenCubeIsUsedAndOutsidePointsClampToBorderCells) {
   PointCloud cloud;
-  cloud.points = {{0.5f, 0.5f, 0.5f}, {-0.5f, -0.5f, -0.5f}, {3.0f, 0.0f, 0.0f}};
+  cloud.points = {{0.25f, 0.25f, 0.25f}, {-0.5f, -0.5f, -0.5f}, {3.0f, 0.0f, 0.0f}};
   BarnesHutTreeOptions options;
   options.max_depth = 2;
   options.cube_center = {0.0, 0.0, 0.0};
