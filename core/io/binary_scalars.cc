@@ -56,7 +56,7 @@ bool IsIntegerScalarType(ScalarType type) {
   return type != ScalarType::kFloat32 && type != ScalarType::kFloat64;
 }
 
-double DecodeScalarAsDouble(const char* data, ScalarType type, std::endian byte_order) {
+double DecodeAnyScalarAsDouble(const char* data, ScalarType type, std::endian byte_order) {
   switch (type) {
     case ScalarType::kFloat32:
       return std::bit_cast<float>(LoadBits<uint32_t>(data, byte_order));

@@ -7,6 +7,7 @@
 #include <bit>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <string>
 
 namespace rpsr::core::io_internal {
@@ -31,7 +32,24 @@ size_t ScalarTypeSize(ScalarType type);
 bool IsIntegerScalarType(ScalarType type);
 
 // Decodes the value of `type` stored at `data` in `byte_order` (at least ScalarTypeSize bytes).
-double DecodeScalarAsDouble(const char* data, ScalarType type, std::endian byte_order);
+double DecodeAnyScalarAsDouble(const char* data, ScalarType type, std::endian byte_order);
+
+// DecodeAnyScalarAsDouble, inline for the common case of floats in the host's byte order.
+inline double DecodeScalarAsDouble(const char* data, ScalarType type, std::endian byte_order) {
+  if (byte_order == std::endian::native) {
+    if (type == ScalarType::kFloat32) {
+      float value;
+      std::memcpy(&value, data, sizeof(value));
+      return value;
+    }
+    if (type == ScalarType::kFloat64) {
+      double value;
+      std::memcpy(&value, data, sizeof(value));
+      return value;
+    }
+  }
+  return DecodeAnyScalarAsDouble(data, type, byte_order);
+}
 
 // Decodes an integer value; false for the float types or a kUint64 above INT64_MAX.
 bool DecodeScalarAsInt64(const char* data, ScalarType type, std::endian byte_order, int64_t* value);

@@ -4,6 +4,8 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -255,8 +257,17 @@ class BinaryValues {
       : bytes_(bytes), position_(offset), byte_order_(byte_order) {}
 
   size_t remaining() const { return bytes_.size() - position_; }
+  size_t position() const { return position_; }
+  std::endian byte_order() const { return byte_order_; }
   const std::string& problem() const { return problem_; }
   std::string Place() const { return absl::StrCat("byte offset ", value_offset_); }
+
+  // Hands out the next `size` bytes, which the caller has checked are there.
+  const char* TakeChecked(size_t size) {
+    const char* data = bytes_.data() + position_;
+    position_ += size;
+    return data;
+  }
   std::string PlaceOfEnd() const { return absl::StrCat("byte offset ", position_); }
 
   bool ReadDouble(ScalarType type, double* value) {
@@ -373,6 +384,59 @@ class AsciiValues {
   std::string problem_;
 };
 
+// The fast path for a binary element without list properties, whose records all have one size:
+// reads (vertex) or jumps over (any other element) all records at once. The caller has checked
+// that count * record size bytes remain. Returns false, having read nothing, for an element with
+// lists; sets `*status` only when a coordinate is not finite.
+bool ReadFixedSizeBinaryRecords(const PlyElement& element, bool is_vertex, bool has_intensity,
+                                absl::string_view name, BinaryValues& values, PlyContents& contents,
+                                absl::Status* status) {
+  size_t record_bytes = 0;
+  // Byte offset within a record and type of x, y, z, intensity.
+  size_t offsets[4] = {0, 0, 0, 0};
+  ScalarType types[4] = {ScalarType::kFloat32, ScalarType::kFloat32, ScalarType::kFloat32,
+                         ScalarType::kFloat32};
+  const PlyProperty* properties[4] = {nullptr, nullptr, nullptr, nullptr};
+  for (const PlyProperty& p : element.properties) {
+    if (p.is_list) return false;
+    if (p.role != PropertyRole::kIgnored) {
+      const int slot = static_cast<int>(p.role) - static_cast<int>(PropertyRole::kX);
+      offsets[slot] = record_bytes;
+      types[slot] = p.type;
+      properties[slot] = &p;
+    }
+    record_bytes += io_internal::ScalarTypeSize(p.type);
+  }
+  if (!is_vertex) {
+    values.TakeChecked(static_cast<size_t>(element.count) * record_bytes);
+    return true;
+  }
+  const std::endian order = values.byte_order();
+  for (uint64_t record = 0; record < element.count; ++record) {
+    const size_t record_offset = values.position();
+    const char* data = values.TakeChecked(record_bytes);
+    Eigen::Vector3f point;
+    for (int k = 0; k < 3; ++k) {
+      const double value = io_internal::DecodeScalarAsDouble(data + offsets[k], types[k], order);
+      point[k] = static_cast<float>(value);
+      if (!std::isfinite(point[k])) {
+        *status = absl::InvalidArgumentError(
+            absl::StrCat(name, ": byte offset ", record_offset + offsets[k], " (element ",
+                         QuotedForMessage(element.name), " record ", record, ", property ",
+                         QuotedForMessage(properties[k]->name), "): coordinate ", value,
+                         " is not a finite float"));
+        return true;
+      }
+    }
+    contents.cloud.points.push_back(point);
+    if (has_intensity) {
+      contents.cloud.intensities.push_back(static_cast<float>(
+          io_internal::DecodeScalarAsDouble(data + offsets[3], types[3], order)));
+    }
+  }
+  return true;
+}
+
 // Reads the body of the file described by `header` from `values` into `contents`.
 template <typename Values>
 absl::Status ReadPlyBody(const PlyHeader& header, absl::string_view name, Values& values,
@@ -422,6 +486,14 @@ absl::Status ReadPlyBody(const PlyHeader& header, absl::string_view name, Values
     if (is_face) {
       contents.mesh.triangles.reserve(
           std::min<uint64_t>(current.count, values.remaining() / (4 * min_bytes_per_value)));
+    }
+    if constexpr (std::is_same_v<Values, BinaryValues>) {
+      absl::Status status;
+      if (ReadFixedSizeBinaryRecords(current, is_vertex, has_intensity, name, values, contents,
+                                     &status)) {
+        if (!status.ok()) return status;
+        continue;
+      }
     }
     for (record = 0; record < current.count; ++record) {
       Eigen::Vector3f point = Eigen::Vector3f::Zero();

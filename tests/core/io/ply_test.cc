@@ -186,11 +186,13 @@ TEST(PlyTest, HandWrittenAsciiWithOtherElementsCommentsAndCrLf) {
   EXPECT_EQ(parsed->mesh.triangles, (std::vector<Eigen::Vector3i>{{0, 1, 2}}));
 }
 
-TEST(PlyTest, LittleEndianIntegerCoordinatesAndUintCounts) {
+TEST(PlyTest, LittleEndianIntegerCoordinatesUintCountsAndASkippedElement) {
   std::string bytes =
-      "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty int16 x\n"
+      "ply\nformat binary_little_endian 1.0\nelement material 2\nproperty uchar r\n"
+      "property double s\nelement vertex 3\nproperty int16 x\n"
       "property uint y\nproperty int8 z\nproperty float intensity\nelement face 1\n"
       "property list uint int vertex_indices\nend_header\n";
+  bytes.append(2 * 9, '\xff');  // two 9-byte material records, NaN doubles: skipped unread
   const int16_t xs[3] = {-3, 0, 300};
   for (int v = 0; v < 3; ++v) {
     bytes.append(reinterpret_cast<const char*>(&xs[v]), 2);
