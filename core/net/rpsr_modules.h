@@ -1,0 +1,132 @@
+// RPSRNet's LibTorch modules (private to core/net: include only from .cc files).
+//
+// Shapes: B pairs per batch, T = kNetTokens (64) tokens per cloud, E = embedding width. Node
+// arrays of all clouds of a batch are packed (concatenated) per depth; index tensors already
+// point into the packed arrays, with the value `rows` (one past the end) for "empty", which
+// gathers an appended zero row ("zero filling" and "child filling" of the paper).
+#ifndef RPSR_CORE_NET_RPSR_MODULES_H_
+#define RPSR_CORE_NET_RPSR_MODULES_H_
+
+#include <torch/torch.h>
+
+#include <array>
+#include <vector>
+
+#include "core/net/net_input.h"
+#include "core/net/rpsr_net.h"
+
+namespace rpsr::core::net {
+
+// A batch of clouds as tensors (see PackClouds).
+struct PackedClouds {
+  int64_t batch = 0;
+  std::array<torch::Tensor, kNetDepths> position;     // [N_d, 6] float
+  std::array<torch::Tensor, kNetDepths> density;      // [N_d, 1] float
+  std::array<torch::Tensor, kNetDepths> neighbors;    // [N_d, 27] int64 (depths 3..5)
+  std::array<torch::Tensor, kNetDepths> child_slots;  // [N_d, 8] int64 into depth + 1 (2..4)
+  torch::Tensor token_node;                           // [B, T] int64 into depth 2
+  torch::Tensor token_com;                            // [B, T, 3] float
+  torch::Tensor token_weight;                         // [B, T] float
+  torch::Tensor token_empty;                          // [B, T] bool
+
+  PackedClouds To(const torch::Device& device) const;
+};
+
+PackedClouds PackClouds(const std::vector<const NetCloudInput*>& clouds);
+
+// Tree convolution: gather the 27 neighbours (zero for empty ones), one linear map over the
+// gathered 27 x C_in values (= Conv1d with kernel 27, stride 27, but one GEMM: ~9x faster on CPU,
+// see DEPS.md), BatchNorm, ReLU.
+class TreeConvImpl : public torch::nn::Module {
+ public:
+  TreeConvImpl(int64_t in_channels, int64_t out_channels);
+  torch::Tensor forward(const torch::Tensor& features, const torch::Tensor& neighbors);
+
+ private:
+  int64_t in_channels_;
+  torch::nn::Linear linear_{nullptr};
+  torch::nn::BatchNorm1d norm_{nullptr};
+};
+TORCH_MODULE(TreeConv);
+
+// Max-pooling from children to parents through the label arrays.
+torch::Tensor PoolToParents(const torch::Tensor& child_features, const torch::Tensor& child_slots);
+
+// One branch of the hierarchical feature encoder (HPFE or HDFE): tree convolutions at depths 5,
+// 4, 3 with max-pooling to the parent depth after each; returns features of the depth-2 nodes.
+class FeatureBranchImpl : public torch::nn::Module {
+ public:
+  FeatureBranchImpl(int64_t in_channels, const std::array<int, 3>& widths);
+  torch::Tensor forward(const PackedClouds& clouds, bool positions);
+
+ private:
+  std::array<TreeConv, 3> convs_{nullptr, nullptr, nullptr};  // depth 5, 4, 3
+};
+TORCH_MODULE(FeatureBranch);
+
+// HFE: HPFE and HDFE fused by a Hadamard product at depth 2, Tree-to-Voxel into T tokens (empty
+// ones zero), and a linear layer up to the embedding width. Output [B, T, E].
+class HierarchicalEncoderImpl : public torch::nn::Module {
+ public:
+  explicit HierarchicalEncoderImpl(const RpsrNetConfig& config);
+  torch::Tensor forward(const PackedClouds& clouds);
+
+ private:
+  FeatureBranch position_branch_{nullptr};
+  FeatureBranch density_branch_{nullptr};
+  torch::nn::Linear to_embedding_{nullptr};
+};
+TORCH_MODULE(HierarchicalEncoder);
+
+// DCP-v2's Transformer: one pre-norm encoder block and one pre-norm decoder block, shared by
+// both directions. Sequence-first inside (LibTorch 1.13 attention has no batch_first).
+class ContextTransformerImpl : public torch::nn::Module {
+ public:
+  explicit ContextTransformerImpl(const RpsrNetConfig& config);
+  // phi(x, y): the residual that makes x's embedding aware of y. x, y: [B, T, E].
+  torch::Tensor forward(const torch::Tensor& x, const torch::Tensor& x_empty,
+                        const torch::Tensor& y, const torch::Tensor& y_empty);
+
+ private:
+  torch::nn::LayerNorm enc_norm1_{nullptr}, enc_norm2_{nullptr};
+  torch::nn::MultiheadAttention enc_attention_{nullptr};
+  torch::nn::Sequential enc_feedforward_{nullptr};
+  torch::nn::LayerNorm dec_norm1_{nullptr}, dec_norm2_{nullptr}, dec_norm3_{nullptr};
+  torch::nn::MultiheadAttention dec_self_attention_{nullptr}, dec_cross_attention_{nullptr};
+  torch::nn::Sequential dec_feedforward_{nullptr};
+};
+TORCH_MODULE(ContextTransformer);
+
+// Weighted Procrustes (Kabsch with the reflection fix) of source points onto target points.
+// src, tgt: [B, T, 3]; weights [B, T] (>= 0, not all 0 per row). Returns R [B, 3, 3], t [B, 3]
+// with tgt ~ R src + t. Differentiable through torch::linalg_svd.
+std::pair<torch::Tensor, torch::Tensor> WeightedProcrustes(const torch::Tensor& src,
+                                                           const torch::Tensor& tgt,
+                                                           const torch::Tensor& weights);
+
+// One pass: HFE of both clouds (the target's may be given precomputed), Transformer residuals,
+// scores (Eq. 3) with empty target tokens masked, soft correspondences and the SVD head.
+struct PassOutput {
+  torch::Tensor rotation;     // [B, 3, 3], moved source -> target
+  torch::Tensor translation;  // [B, 3]
+  torch::Tensor scores;       // [B, T, T]
+};
+
+class RpsrNetworkImpl : public torch::nn::Module {
+ public:
+  explicit RpsrNetworkImpl(const RpsrNetConfig& config);
+  torch::Tensor Encode(const PackedClouds& clouds) { return encoder_->forward(clouds); }
+  PassOutput Pass(const PackedClouds& source, const PackedClouds& target,
+                  const torch::Tensor& target_embedding);
+  const RpsrNetConfig& config() const { return config_; }
+
+ private:
+  RpsrNetConfig config_;
+  HierarchicalEncoder encoder_{nullptr};
+  ContextTransformer transformer_{nullptr};
+};
+TORCH_MODULE(RpsrNetwork);
+
+}  // namespace rpsr::core::net
+
+#endif  // RPSR_CORE_NET_RPSR_MODULES_H_

@@ -1,0 +1,215 @@
+#include "core/net/rpsr_net.h"
+
+#include <cstdio>
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
+#include "core/io/file_bytes.h"
+#include "core/net/rpsr_net_impl.h"
+#include "core/net/weights_file.h"
+
+namespace rpsr::core {
+namespace net {
+
+std::string ConfigToText(const RpsrNetConfig& c) {
+  return absl::StrCat("conv_widths=", c.conv_widths[0], ",", c.conv_widths[1], ",",
+                      c.conv_widths[2], "\nembedding_width=", c.embedding_width,
+                      "\nattention_heads=", c.attention_heads,
+                      "\nfeedforward_width=", c.feedforward_width, "\npasses=", c.passes, "\n");
+}
+
+absl::StatusOr<RpsrNetConfig> ConfigFromText(absl::string_view text) {
+  RpsrNetConfig c;
+  for (absl::string_view line : absl::StrSplit(text, '\n', absl::SkipEmpty())) {
+    std::pair<absl::string_view, absl::string_view> kv = absl::StrSplit(line, '=');
+    auto parse = [&](int& out) -> absl::Status {
+      if (!absl::SimpleAtoi(kv.second, &out) || out <= 0) {
+        return absl::InvalidArgumentError(absl::StrCat("bad network config line '", line, "'"));
+      }
+      return absl::OkStatus();
+    };
+    absl::Status s;
+    if (kv.first == "conv_widths") {
+      std::vector<absl::string_view> parts = absl::StrSplit(kv.second, ',');
+      if (parts.size() != 3) return absl::InvalidArgumentError("conv_widths needs 3 values");
+      for (int i = 0; i < 3; ++i) {
+        if (!absl::SimpleAtoi(parts[i], &c.conv_widths[i]) || c.conv_widths[i] <= 0) {
+          return absl::InvalidArgumentError(absl::StrCat("bad conv_widths '", kv.second, "'"));
+        }
+      }
+    } else if (kv.first == "embedding_width") {
+      s = parse(c.embedding_width);
+    } else if (kv.first == "attention_heads") {
+      s = parse(c.attention_heads);
+    } else if (kv.first == "feedforward_width") {
+      s = parse(c.feedforward_width);
+    } else if (kv.first == "passes") {
+      s = parse(c.passes);
+    }  // Unknown keys are ignored: newer files may carry more.
+    if (!s.ok()) return s;
+  }
+  if (c.embedding_width % c.attention_heads != 0) {
+    return absl::InvalidArgumentError(absl::StrCat("embedding_width ", c.embedding_width,
+                                                   " is not a multiple of attention_heads ",
+                                                   c.attention_heads));
+  }
+  return c;
+}
+
+absl::StatusOr<PackedClouds> PackTargets(absl::Span<const NetPair> pairs) {
+  std::vector<NetCloudInput> inputs;
+  inputs.reserve(pairs.size());
+  for (size_t b = 0; b < pairs.size(); ++b) {
+    if (pairs[b].source == nullptr || pairs[b].target == nullptr) {
+      return absl::InvalidArgumentError(absl::StrCat("pair ", b, " lacks a source or target tree"));
+    }
+    absl::StatusOr<NetCloudInput> input = MakeNetInput(*pairs[b].target);
+    if (!input.ok()) return input.status();
+    inputs.push_back(*std::move(input));
+  }
+  std::vector<const NetCloudInput*> pointers;
+  for (const NetCloudInput& in : inputs) pointers.push_back(&in);
+  return PackClouds(pointers);
+}
+
+absl::StatusOr<PackedClouds> PackMovedSources(absl::Span<const NetPair> pairs,
+                                              const std::vector<Eigen::Isometry3d>& estimates) {
+  std::vector<NetCloudInput> inputs;
+  inputs.reserve(pairs.size());
+  for (size_t b = 0; b < pairs.size(); ++b) {
+    absl::StatusOr<NetCloudInput> input =
+        MakeMovedNetInput(*pairs[b].source, estimates[b], *pairs[b].target);
+    if (!input.ok()) return input.status();
+    inputs.push_back(*std::move(input));
+  }
+  std::vector<const NetCloudInput*> pointers;
+  for (const NetCloudInput& in : inputs) pointers.push_back(&in);
+  return PackClouds(pointers);
+}
+
+std::vector<Eigen::Isometry3d> ToIsometries(const torch::Tensor& rotation,
+                                            const torch::Tensor& translation) {
+  torch::Tensor R = rotation.detach().to(torch::kCPU, torch::kFloat64).contiguous();
+  torch::Tensor t = translation.detach().to(torch::kCPU, torch::kFloat64).contiguous();
+  std::vector<Eigen::Isometry3d> out(R.size(0), Eigen::Isometry3d::Identity());
+  for (int64_t b = 0; b < R.size(0); ++b) {
+    out[b].linear() = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(
+        R.data_ptr<double>() + b * 9);
+    out[b].translation() = Eigen::Map<const Eigen::Vector3d>(t.data_ptr<double>() + b * 3);
+  }
+  return out;
+}
+
+}  // namespace net
+
+RpsrNet::RpsrNet(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+RpsrNet::~RpsrNet() = default;
+
+absl::StatusOr<std::unique_ptr<RpsrNet>> RpsrNet::Create(const RpsrNetConfig& config,
+                                                         uint64_t seed) {
+  absl::StatusOr<RpsrNetConfig> checked = net::ConfigFromText(net::ConfigToText(config));
+  if (!checked.ok()) return checked.status();
+  try {
+    torch::manual_seed(seed);
+    auto impl = std::make_unique<Impl>();
+    impl->config = *checked;
+    impl->network = net::RpsrNetwork(*checked);
+    impl->network->eval();
+    return std::unique_ptr<RpsrNet>(new RpsrNet(std::move(impl)));
+  } catch (const c10::Error& e) {
+    return absl::InternalError(
+        absl::StrCat("creating the network failed: ", e.what_without_backtrace()));
+  }
+}
+
+absl::StatusOr<std::unique_ptr<RpsrNet>> RpsrNet::LoadFromBytes(absl::string_view bytes,
+                                                                absl::string_view name) {
+  try {
+    absl::StatusOr<net::NamedTensors> weights = net::ParseWeights(bytes, name);
+    if (!weights.ok()) return weights.status();
+    absl::StatusOr<RpsrNetConfig> config = net::ConfigFromText(weights->config_text);
+    if (!config.ok()) {
+      return absl::InvalidArgumentError(absl::StrCat(name, ": ", config.status().message()));
+    }
+    absl::StatusOr<std::unique_ptr<RpsrNet>> net = Create(*config, 0);
+    if (!net.ok()) return net.status();
+    if (absl::Status s = net::LoadTensorsInto(*weights, *(*net)->impl_->network); !s.ok()) {
+      return absl::InvalidArgumentError(absl::StrCat(name, ": ", s.message()));
+    }
+    return net;
+  } catch (const c10::Error& e) {
+    return absl::InternalError(
+        absl::StrCat(name, ": loading failed: ", e.what_without_backtrace()));
+  }
+}
+
+absl::StatusOr<std::unique_ptr<RpsrNet>> RpsrNet::Load(const std::string& path) {
+  absl::StatusOr<std::string> bytes = ReadFileBytes(path, size_t{1} << 30);
+  if (!bytes.ok()) return bytes.status();
+  return LoadFromBytes(*bytes, path);
+}
+
+absl::Status RpsrNet::Save(const std::string& path) const {
+  try {
+    return WriteFileBytes(path, net::SerializeWeights(net::CollectTensors(
+                                    *impl_->network, net::ConfigToText(impl_->config))));
+  } catch (const c10::Error& e) {
+    return absl::InternalError(absl::StrCat(path, ": saving failed: ", e.what_without_backtrace()));
+  }
+}
+
+const RpsrNetConfig& RpsrNet::config() const { return impl_->config; }
+
+int64_t RpsrNet::NumParameters() const {
+  int64_t n = 0;
+  for (const torch::Tensor& p : impl_->network->parameters()) n += p.numel();
+  return n;
+}
+
+absl::StatusOr<std::vector<NetEstimate>> RpsrNet::Estimate(absl::Span<const NetPair> pairs,
+                                                           int passes) const {
+  if (pairs.empty()) return std::vector<NetEstimate>{};
+  if (passes <= 0) passes = impl_->config.passes;
+  try {
+    torch::InferenceMode inference;
+    net::RpsrNetwork& network = impl_->network;
+    absl::StatusOr<net::PackedClouds> targets = net::PackTargets(pairs);
+    if (!targets.ok()) return targets.status();
+    const net::PackedClouds target = targets->To(impl_->device);
+    const torch::Tensor target_embedding = network->Encode(target);
+
+    std::vector<NetEstimate> results(pairs.size());
+    std::vector<Eigen::Isometry3d> estimates;
+    for (const NetPair& pair : pairs) estimates.push_back(pair.initial);
+    torch::Tensor scores;
+    torch::Tensor source_empty;
+    for (int pass = 0; pass < passes; ++pass) {
+      absl::StatusOr<net::PackedClouds> sources = net::PackMovedSources(pairs, estimates);
+      if (!sources.ok()) return sources.status();
+      const net::PackedClouds source = sources->To(impl_->device);
+      net::PassOutput out = network->Pass(source, target, target_embedding);
+      const std::vector<Eigen::Isometry3d> steps = net::ToIsometries(out.rotation, out.translation);
+      for (size_t b = 0; b < pairs.size(); ++b) {
+        estimates[b] = steps[b] * estimates[b];
+        results[b].per_pass.push_back(estimates[b]);
+      }
+      scores = out.scores;
+      source_empty = source.token_empty;
+    }
+    // Mean peak score over the non-empty source tokens of the last pass.
+    torch::Tensor peak = std::get<0>(scores.max(-1)).to(torch::kCPU);
+    torch::Tensor valid = (~source_empty).to(torch::kCPU).to(torch::kFloat32);
+    torch::Tensor mean_peak = (peak * valid).sum(1) / valid.sum(1).clamp_min(1.0);
+    for (size_t b = 0; b < pairs.size(); ++b) {
+      results[b].T_target_source = estimates[b];
+      results[b].score_peak = mean_peak[b].item<double>();
+    }
+    return results;
+  } catch (const c10::Error& e) {
+    return absl::InternalError(
+        absl::StrCat("network forward pass failed: ", e.what_without_backtrace()));
+  }
+}
+
+}  // namespace rpsr::core

@@ -1,0 +1,94 @@
+// RPSRNet (paper Sec. 3): from the Barnes-Hut trees of a source and a target cloud to the rigid
+// motion T_target_source, over several passes. LibTorch stays behind this header (pimpl).
+//
+// Architecture and the choices the paper leaves open (details in rpsr_modules.h, net_input.h):
+// - HFE: position (HPFE) and density (HDFE) branches of tree convolutions at depths 5, 4, 3 with
+//   widths conv_widths (the paper's Eq. 4 gives 2^(10-d): 32, 64, 128) and max-pooling to
+//   parents; Hadamard fusion at depth 2; Tree-to-Voxel (64 tokens, empty ones zero and masked);
+//   a linear layer to `embedding_width`.
+// - DCP-v2 Transformer (one encoder and one decoder block, shared both ways, pre-norm); scores
+//   softmax(F_src F_tgt^T / sqrt(E)) over non-empty target tokens; soft correspondences =
+//   scores x target token centres of mass; weighted Procrustes with weights = the source
+//   tokens' point fractions.
+// - Passes: pass k moves the source by the estimate so far, re-bins it into the target's cube
+//   and estimates the remaining motion; the estimates compose. Between passes the estimate is
+//   treated as a constant (no gradient through the re-binning, which is discrete).
+// - embedding_width defaults to 128, not the paper's 512: on one CPU core the Transformer's cost
+//   grows with E^2 and 512 alone costs ~25 ms a pass (DEPS.md); the eval tables report the trade.
+#ifndef RPSR_CORE_NET_RPSR_NET_H_
+#define RPSR_CORE_NET_RPSR_NET_H_
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "Eigen/Geometry"
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/types/span.h"
+#include "core/tree/bh_tree.h"
+
+namespace rpsr::core {
+
+struct RpsrNetConfig {
+  std::array<int, 3> conv_widths = {32, 64, 128};  // tree convolutions at depths 5, 4, 3
+  int embedding_width = 128;                       // E, token width after Tree-to-Voxel
+  int attention_heads = 4;
+  int feedforward_width = 256;
+  int passes = 3;  // default number of passes at inference
+};
+
+// One pair to register. Trees must have depth >= 5 with neighbour tables to depth 5 (the
+// BarnesHutTreeOptions defaults). `initial` is a starting guess of T_target_source.
+struct NetPair {
+  const Octree* source = nullptr;
+  const Octree* target = nullptr;
+  Eigen::Isometry3d initial = Eigen::Isometry3d::Identity();
+};
+
+struct NetEstimate {
+  Eigen::Isometry3d T_target_source = Eigen::Isometry3d::Identity();
+  std::vector<Eigen::Isometry3d> per_pass;  // the estimate after each pass
+  // Mean over source tokens of the largest score (how peaked the soft correspondences are), of
+  // the last pass: an input for the confidence model, not a probability itself.
+  double score_peak = 0.0;
+};
+
+class RpsrNet {
+ public:
+  // A network with freshly initialised weights (seeded), for training.
+  static absl::StatusOr<std::unique_ptr<RpsrNet>> Create(const RpsrNetConfig& config,
+                                                         uint64_t seed);
+  // Loads weights written by Save (any LibTorch version: see weights_file.h).
+  static absl::StatusOr<std::unique_ptr<RpsrNet>> Load(const std::string& path);
+  static absl::StatusOr<std::unique_ptr<RpsrNet>> LoadFromBytes(absl::string_view bytes,
+                                                                absl::string_view name);
+
+  ~RpsrNet();
+  RpsrNet(const RpsrNet&) = delete;
+  RpsrNet& operator=(const RpsrNet&) = delete;
+
+  absl::Status Save(const std::string& path) const;
+  const RpsrNetConfig& config() const;
+  // Number of trainable scalars.
+  int64_t NumParameters() const;
+
+  // Registers every pair in one batched forward pass per pass (inference mode, thread-safe).
+  // passes <= 0 uses config().passes. Results equal those of the pairs one at a time.
+  absl::StatusOr<std::vector<NetEstimate>> Estimate(absl::Span<const NetPair> pairs,
+                                                    int passes = 0) const;
+
+  // For the trainer (core/net/trainer.cc), which lives beside the implementation.
+  struct Impl;
+  Impl& impl() { return *impl_; }
+
+ private:
+  explicit RpsrNet(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace rpsr::core
+
+#endif  // RPSR_CORE_NET_RPSR_NET_H_

@@ -1,0 +1,40 @@
+// RpsrNet's implementation state, shared by rpsr_net.cc and trainer.cc (private to core/net).
+#ifndef RPSR_CORE_NET_RPSR_NET_IMPL_H_
+#define RPSR_CORE_NET_RPSR_NET_IMPL_H_
+
+#include <torch/torch.h>
+
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "core/net/rpsr_modules.h"
+#include "core/net/rpsr_net.h"
+
+namespace rpsr::core {
+
+struct RpsrNet::Impl {
+  RpsrNetConfig config;
+  net::RpsrNetwork network{nullptr};
+  torch::Device device = torch::kCPU;
+};
+
+namespace net {
+
+std::string ConfigToText(const RpsrNetConfig& config);
+absl::StatusOr<RpsrNetConfig> ConfigFromText(absl::string_view text);
+
+// The network's inputs of a batch of pairs for one pass: the targets (fixed over passes) and
+// the sources moved by `estimates` and re-binned into their targets' cubes.
+absl::StatusOr<PackedClouds> PackTargets(absl::Span<const NetPair> pairs);
+absl::StatusOr<PackedClouds> PackMovedSources(absl::Span<const NetPair> pairs,
+                                              const std::vector<Eigen::Isometry3d>& estimates);
+
+// [B, 3, 3] and [B, 3] tensors -> isometries (double).
+std::vector<Eigen::Isometry3d> ToIsometries(const torch::Tensor& rotation,
+                                            const torch::Tensor& translation);
+
+}  // namespace net
+}  // namespace rpsr::core
+
+#endif  // RPSR_CORE_NET_RPSR_NET_IMPL_H_
