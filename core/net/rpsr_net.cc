@@ -1,5 +1,6 @@
 #include "core/net/rpsr_net.h"
 
+#include <algorithm>
 #include <cstdio>
 
 #include "absl/strings/numbers.h"
@@ -102,6 +103,8 @@ std::vector<Eigen::Isometry3d> ToIsometries(const torch::Tensor& rotation,
 }
 
 }  // namespace net
+
+void SetNetThreads(int threads) { torch::set_num_threads(std::max(threads, 1)); }
 
 RpsrNet::RpsrNet(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 RpsrNet::~RpsrNet() = default;

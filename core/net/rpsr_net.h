@@ -89,6 +89,10 @@ class RpsrNet {
   std::unique_ptr<Impl> impl_;
 };
 
+// Sets LibTorch's intra-op threads for the process (DEPS.md: the default was 1 here; prefer one
+// thread per worker and OMP_WAIT_POLICY=PASSIVE when other threads are busy).
+void SetNetThreads(int threads);
+
 }  // namespace rpsr::core
 
 #endif  // RPSR_CORE_NET_RPSR_NET_H_

@@ -1,0 +1,67 @@
+// rpsr: the command line of the rpsr registration service.
+//   rpsr <subcommand> [flags]      rpsr <subcommand> --help
+#include <cstdio>
+#include <cstring>
+#include <functional>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "absl/flags/parse.h"
+#include "absl/flags/usage.h"
+#include "absl/flags/usage_config.h"
+#include "client/cli/subcommands.h"
+
+namespace {
+
+struct Subcommand {
+  const char* summary;
+  std::function<int(const std::vector<std::string>&)> run;
+};
+
+const std::map<std::string, Subcommand>& Subcommands() {
+  static const auto* commands = new std::map<std::string, Subcommand>{
+      {"train",
+       {"train RPSRNet end to end on a seeded pair protocol (objects or LiDAR)",
+        rpsr::client::RunTrainCommand}},
+  };
+  return *commands;
+}
+
+void PrintUsage() {
+  std::fprintf(stderr, "usage: rpsr <subcommand> [flags]\n\nsubcommands:\n");
+  for (const auto& [name, command] : Subcommands()) {
+    std::fprintf(stderr, "  %-8s %s\n", name.c_str(), command.summary);
+  }
+  std::fprintf(stderr, "\n'rpsr <subcommand> --help' lists a subcommand's flags.\n");
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 2 || std::strcmp(argv[1], "--help") == 0 || std::strcmp(argv[1], "help") == 0) {
+    PrintUsage();
+    return argc < 2 ? 2 : 0;
+  }
+  const std::string name = argv[1];
+  auto it = Subcommands().find(name);
+  if (it == Subcommands().end()) {
+    std::fprintf(stderr, "rpsr: unknown subcommand '%s'\n\n", name.c_str());
+    PrintUsage();
+    return 2;
+  }
+  // Flags are defined in <name>_command.cc: `--help` shows that file's flags only.
+  std::vector<char*> args = {argv[0]};
+  std::string helpon = "--helpon=" + name + "_command";
+  for (int i = 2; i < argc; ++i) {
+    if (std::strcmp(argv[i], "--help") == 0 || std::strcmp(argv[i], "-h") == 0) {
+      args.push_back(helpon.data());
+    } else {
+      args.push_back(argv[i]);
+    }
+  }
+  absl::SetProgramUsageMessage("rpsr " + name + " [flags]: " + it->second.summary);
+  std::vector<char*> rest = absl::ParseCommandLine(static_cast<int>(args.size()), args.data());
+  std::vector<std::string> positional(rest.begin() + 1, rest.end());
+  return it->second.run(positional);
+}

@@ -1,0 +1,421 @@
+#include "core/net/trainer.h"
+
+#include <torch/torch.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <numeric>
+#include <optional>
+#include <sstream>
+#include <thread>
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
+#include "core/data/transform_convention.h"
+#include "core/io/file_bytes.h"
+#include "core/net/rpsr_net_impl.h"
+
+namespace rpsr::core {
+namespace {
+
+constexpr double kRadToDeg = 180.0 / M_PI;
+
+// A pair ready for the network: its trees and the truth.
+struct TreePair {
+  Octree source;
+  Octree target;
+  Eigen::Isometry3d T_target_source;
+};
+
+// Generates pairs [first, first + count) on `threads` threads; the result depends on the indices
+// only, not on the thread count.
+absl::StatusOr<std::vector<TreePair>> MakeTreePairs(const TrainingPairGenerator& generator,
+                                                    uint64_t first, int count, int threads,
+                                                    const BarnesHutTreeOptions& tree_options) {
+  std::vector<std::optional<TreePair>> pairs(count);
+  std::vector<absl::Status> errors(count);
+  std::atomic<int> next{0};
+  auto work = [&] {
+    for (int i = next++; i < count; i = next++) {
+      absl::StatusOr<RegistrationPair> pair = generator(first + i);
+      if (!pair.ok()) {
+        errors[i] = pair.status();
+        continue;
+      }
+      absl::StatusOr<Octree> source = BuildOctree(pair->source, tree_options);
+      absl::StatusOr<Octree> target = BuildOctree(pair->target, tree_options);
+      if (!source.ok() || !target.ok()) {
+        errors[i] = source.ok() ? target.status() : source.status();
+        continue;
+      }
+      pairs[i] = TreePair{*std::move(source), *std::move(target), pair->T_target_source};
+    }
+  };
+  std::vector<std::thread> pool;
+  for (int t = 1; t < std::max(threads, 1); ++t) pool.emplace_back(work);
+  work();
+  for (std::thread& t : pool) t.join();
+  std::vector<TreePair> out;
+  out.reserve(count);
+  for (int i = 0; i < count; ++i) {
+    if (!errors[i].ok()) {
+      return absl::Status(errors[i].code(),
+                          absl::StrCat("training pair ", first + i, ": ", errors[i].message()));
+    }
+    out.push_back(*std::move(pairs[i]));
+  }
+  return out;
+}
+
+std::vector<NetPair> AsNetPairs(const std::vector<TreePair>& pairs, size_t begin, size_t end) {
+  std::vector<NetPair> out;
+  for (size_t i = begin; i < end; ++i) out.push_back({&pairs[i].source, &pairs[i].target});
+  return out;
+}
+
+struct TrainerState {
+  int epochs_done = 0;
+  double best_rotation_rmse_deg = 1e30;
+};
+
+absl::Status WriteState(const std::string& path, const TrainerState& state, double sigma_r,
+                        double sigma_t) {
+  return WriteFileBytes(
+      path, absl::StrCat("epochs_done=", state.epochs_done,
+                         "\nbest_rotation_rmse_deg=", state.best_rotation_rmse_deg,
+                         "\nsigma_rotation=", sigma_r, "\nsigma_translation=", sigma_t, "\n"));
+}
+
+absl::Status ReadState(const std::string& path, TrainerState& state, double& sigma_r,
+                       double& sigma_t) {
+  absl::StatusOr<std::string> text = ReadFileBytes(path, 1 << 20);
+  if (!text.ok()) return text.status();
+  for (absl::string_view line : absl::StrSplit(*text, '\n', absl::SkipEmpty())) {
+    std::pair<absl::string_view, absl::string_view> kv = absl::StrSplit(line, '=');
+    bool ok = true;
+    if (kv.first == "epochs_done") ok = absl::SimpleAtoi(kv.second, &state.epochs_done);
+    if (kv.first == "best_rotation_rmse_deg") {
+      ok = absl::SimpleAtod(kv.second, &state.best_rotation_rmse_deg);
+    }
+    if (kv.first == "sigma_rotation") ok = absl::SimpleAtod(kv.second, &sigma_r);
+    if (kv.first == "sigma_translation") ok = absl::SimpleAtod(kv.second, &sigma_t);
+    if (!ok) return absl::DataLossError(absl::StrCat(path, ": bad line '", line, "'"));
+  }
+  return absl::OkStatus();
+}
+
+torch::Tensor RotationsOf(const std::vector<TreePair>& pairs, size_t begin, size_t end) {
+  torch::Tensor R = torch::empty({static_cast<int64_t>(end - begin), 3, 3}, torch::kFloat32);
+  for (size_t i = begin; i < end; ++i) {
+    const Eigen::Matrix<float, 3, 3, Eigen::RowMajor> r =
+        pairs[i].T_target_source.linear().cast<float>();
+    std::copy(r.data(), r.data() + 9, R.data_ptr<float>() + (i - begin) * 9);
+  }
+  return R;
+}
+
+torch::Tensor TranslationsOf(const std::vector<TreePair>& pairs, size_t begin, size_t end) {
+  torch::Tensor t = torch::empty({static_cast<int64_t>(end - begin), 3}, torch::kFloat32);
+  for (size_t i = begin; i < end; ++i) {
+    const Eigen::Vector3f v = pairs[i].T_target_source.translation().cast<float>();
+    std::copy(v.data(), v.data() + 3, t.data_ptr<float>() + (i - begin) * 3);
+  }
+  return t;
+}
+
+torch::Tensor ToTensor(const std::vector<Eigen::Isometry3d>& estimates, bool rotation) {
+  const int64_t b = static_cast<int64_t>(estimates.size());
+  torch::Tensor out = torch::empty(
+      rotation ? std::vector<int64_t>{b, 3, 3} : std::vector<int64_t>{b, 3}, torch::kFloat32);
+  for (int64_t i = 0; i < b; ++i) {
+    if (rotation) {
+      const Eigen::Matrix<float, 3, 3, Eigen::RowMajor> r = estimates[i].linear().cast<float>();
+      std::copy(r.data(), r.data() + 9, out.data_ptr<float>() + i * 9);
+    } else {
+      const Eigen::Vector3f v = estimates[i].translation().cast<float>();
+      std::copy(v.data(), v.data() + 3, out.data_ptr<float>() + i * 3);
+    }
+  }
+  return out;
+}
+
+struct ValidationErrors {
+  double rotation_rmse_deg = 0.0;
+  double rotation_median_deg = 0.0;
+  double translation_rmse = 0.0;
+};
+
+absl::StatusOr<ValidationErrors> Validate(RpsrNet& net, const std::vector<TreePair>& pairs,
+                                          int batch_size, int passes) {
+  std::vector<double> rotation_errors;
+  double rotation_sq = 0.0;
+  double translation_sq = 0.0;
+  for (size_t begin = 0; begin < pairs.size(); begin += batch_size) {
+    const size_t end = std::min(pairs.size(), begin + batch_size);
+    std::vector<NetPair> batch = AsNetPairs(pairs, begin, end);
+    absl::StatusOr<std::vector<NetEstimate>> estimates = net.Estimate(batch, passes);
+    if (!estimates.ok()) return estimates.status();
+    for (size_t i = begin; i < end; ++i) {
+      const Eigen::Isometry3d& est = (*estimates)[i - begin].T_target_source;
+      const double r =
+          RotationErrorRad(pairs[i].T_target_source.linear(), est.linear()) * kRadToDeg;
+      const double t = TranslationError(pairs[i].T_target_source.translation(), est.translation());
+      rotation_errors.push_back(r);
+      rotation_sq += r * r;
+      translation_sq += t * t;
+    }
+  }
+  ValidationErrors errors;
+  const double n = std::max<double>(1.0, rotation_errors.size());
+  errors.rotation_rmse_deg = std::sqrt(rotation_sq / n);
+  errors.translation_rmse = std::sqrt(translation_sq / n);
+  if (!rotation_errors.empty()) {
+    std::nth_element(rotation_errors.begin(), rotation_errors.begin() + rotation_errors.size() / 2,
+                     rotation_errors.end());
+    errors.rotation_median_deg = rotation_errors[rotation_errors.size() / 2];
+  }
+  return errors;
+}
+
+}  // namespace
+
+absl::StatusOr<std::vector<EpochRecord>> TrainRpsrNet(
+    RpsrNet& net, const TrainingPairGenerator& train, const TrainingPairGenerator& validation,
+    const TrainerOptions& options, const std::function<void(const TrainerProgress&)>& on_progress,
+    const std::function<void(const EpochRecord&)>& on_epoch) {
+  if (options.output_dir.empty()) {
+    return absl::InvalidArgumentError("training needs an output folder (--output)");
+  }
+  if (options.batch_size < 1 || options.epochs < 0 ||
+      options.pairs_per_epoch < options.batch_size || options.passes < 1) {
+    return absl::InvalidArgumentError(
+        "training needs batch_size >= 1, pairs_per_epoch >= batch_size, passes >= 1");
+  }
+  std::error_code ec;
+  std::filesystem::create_directories(options.output_dir, ec);
+  if (ec) {
+    return absl::PermissionDeniedError(
+        absl::StrCat(options.output_dir, ": cannot create: ", ec.message()));
+  }
+  const std::string state_path = options.output_dir + "/trainer_state.txt";
+  const std::string optimizer_path = options.output_dir + "/optimizer.pt";
+  const std::string last_path = options.output_dir + "/last.rpsrw";
+  const std::string best_path = options.output_dir + "/model.rpsrw";
+  const std::string log_path = options.output_dir + "/training_log.csv";
+
+  try {
+    torch::manual_seed(options.seed);
+    if (options.deterministic) at::globalContext().setDeterministicAlgorithms(true, true);
+    torch::Device device(torch::kCPU);
+    if (options.device == "cuda") {
+      if (!torch::cuda::is_available()) {
+        return absl::FailedPreconditionError(
+            "--device cuda asked for, but this LibTorch build sees no CUDA device");
+      }
+      device = torch::Device(torch::kCUDA);
+    } else if (options.device != "cpu") {
+      return absl::InvalidArgumentError(absl::StrCat("unknown device '", options.device, "'"));
+    }
+
+    RpsrNet::Impl& impl = net.impl();
+    TrainerState state;
+    double sigma_r0 = 0.0;
+    double sigma_t0 = 0.0;
+    const bool resuming =
+        options.resume && std::filesystem::exists(state_path) && std::filesystem::exists(last_path);
+    if (resuming) {
+      if (absl::Status s = ReadState(state_path, state, sigma_r0, sigma_t0); !s.ok()) return s;
+      absl::StatusOr<std::unique_ptr<RpsrNet>> last = RpsrNet::Load(last_path);
+      if (!last.ok()) return last.status();
+      torch::NoGradGuard no_grad;
+      auto from = (*last)->impl().network->named_parameters();
+      for (auto& item : impl.network->named_parameters())
+        item.value().copy_(*from.find(item.key()));
+      auto from_buffers = (*last)->impl().network->named_buffers();
+      for (auto& item : impl.network->named_buffers()) {
+        item.value().copy_(*from_buffers.find(item.key()));
+      }
+    }
+    impl.network->to(device);
+    impl.device = device;
+    torch::Tensor sigma_r =
+        torch::full({1}, sigma_r0, torch::TensorOptions().device(device)).set_requires_grad(true);
+    torch::Tensor sigma_t =
+        torch::full({1}, sigma_t0, torch::TensorOptions().device(device)).set_requires_grad(true);
+    std::vector<torch::Tensor> parameters = impl.network->parameters();
+    parameters.push_back(sigma_r);
+    parameters.push_back(sigma_t);
+    torch::optim::Adam optimizer(
+        parameters,
+        torch::optim::AdamOptions(options.learning_rate).weight_decay(options.weight_decay));
+    if (resuming && std::filesystem::exists(optimizer_path)) {
+      torch::load(optimizer, optimizer_path);
+    }
+    std::vector<int> milestones = options.lr_milestones;
+    if (milestones.empty()) {
+      milestones = {static_cast<int>(options.epochs * 0.6),
+                    static_cast<int>(options.epochs * 0.85)};
+    }
+
+    // The validation set is fixed: indices from a range disjoint from training's by the caller's
+    // generator (validation is a different generator).
+    absl::StatusOr<std::vector<TreePair>> validation_pairs = MakeTreePairs(
+        validation, 0, options.validation_pairs, options.data_threads, options.tree_options);
+    if (!validation_pairs.ok()) return validation_pairs.status();
+
+    std::ofstream log(log_path, resuming ? std::ios::app : std::ios::trunc);
+    if (!resuming) {
+      log << "epoch,train_loss,train_rotation_loss,train_translation_loss,"
+             "validation_rotation_rmse_deg,validation_rotation_median_deg,"
+             "validation_translation_rmse,sigma_rotation,sigma_translation,learning_rate,"
+             "skipped_batches,seconds\n";
+    }
+
+    const int batches = options.pairs_per_epoch / options.batch_size;
+    const auto start = std::chrono::steady_clock::now();
+    int batches_done_here = 0;
+    const int total_batches_here = (options.epochs - state.epochs_done) * batches;
+    std::vector<EpochRecord> records;
+    for (int epoch = state.epochs_done + 1; epoch <= options.epochs; ++epoch) {
+      const auto epoch_start = std::chrono::steady_clock::now();
+      double lr = options.learning_rate;
+      for (int m : milestones) {
+        if (epoch > m) lr *= options.lr_gamma;
+      }
+      for (auto& group : optimizer.param_groups()) {
+        static_cast<torch::optim::AdamOptions&>(group.options()).lr(lr);
+      }
+      impl.network->train();
+      EpochRecord record;
+      record.epoch = epoch;
+      record.learning_rate = lr;
+      double loss_sum = 0.0;
+      double rotation_loss_sum = 0.0;
+      double translation_loss_sum = 0.0;
+      int stepped = 0;
+      for (int b = 0; b < batches; ++b) {
+        const uint64_t first = (static_cast<uint64_t>(epoch - 1) * batches + b) *
+                               static_cast<uint64_t>(options.batch_size);
+        absl::StatusOr<std::vector<TreePair>> pairs = MakeTreePairs(
+            train, first, options.batch_size, options.data_threads, options.tree_options);
+        if (!pairs.ok()) return pairs.status();
+        std::vector<NetPair> batch = AsNetPairs(*pairs, 0, pairs->size());
+        torch::Tensor R_gt = RotationsOf(*pairs, 0, pairs->size()).to(device);
+        torch::Tensor t_gt = TranslationsOf(*pairs, 0, pairs->size()).to(device);
+
+        absl::StatusOr<net::PackedClouds> targets = net::PackTargets(batch);
+        if (!targets.ok()) return targets.status();
+        const net::PackedClouds target = targets->To(device);
+        torch::Tensor target_embedding = impl.network->Encode(target);
+        std::vector<Eigen::Isometry3d> estimates(batch.size(), Eigen::Isometry3d::Identity());
+        torch::Tensor loss = torch::zeros({1}, torch::TensorOptions().device(device));
+        torch::Tensor rotation_loss, translation_loss;
+        for (int pass = 1; pass <= options.passes; ++pass) {
+          absl::StatusOr<net::PackedClouds> sources = net::PackMovedSources(batch, estimates);
+          if (!sources.ok()) return sources.status();
+          net::PassOutput out = impl.network->Pass(sources->To(device), target, target_embedding);
+          // Compose with the (constant) estimate so far: T_k = step o T_{k-1}.
+          torch::Tensor R_prev = ToTensor(estimates, true).to(device);
+          torch::Tensor t_prev = ToTensor(estimates, false).to(device);
+          torch::Tensor R = torch::matmul(out.rotation, R_prev);
+          torch::Tensor t =
+              torch::matmul(out.rotation, t_prev.unsqueeze(-1)).squeeze(-1) + out.translation;
+          rotation_loss = (torch::matmul(R.transpose(1, 2), R_gt) -
+                           torch::eye(3, torch::TensorOptions().device(device)))
+                              .pow(2)
+                              .sum({1, 2})
+                              .mean();
+          translation_loss = (t - t_gt).pow(2).sum(1).mean();
+          torch::Tensor pass_loss = torch::exp(-sigma_r) * rotation_loss + sigma_r +
+                                    torch::exp(-sigma_t) * translation_loss + sigma_t;
+          loss = loss + std::pow(0.5, pass) * pass_loss;
+          estimates = net::ToIsometries(R, t);
+        }
+        const double loss_value = loss.item<double>();
+        if (std::isfinite(loss_value)) {
+          optimizer.zero_grad();
+          loss.backward();
+          torch::nn::utils::clip_grad_norm_(parameters, options.gradient_clip_norm);
+          bool finite = true;
+          for (const torch::Tensor& p : parameters) {
+            if (p.grad().defined() && !torch::isfinite(p.grad()).all().item<bool>()) finite = false;
+          }
+          if (finite) {
+            optimizer.step();
+            loss_sum += loss_value;
+            rotation_loss_sum += rotation_loss.item<double>();
+            translation_loss_sum += translation_loss.item<double>();
+            ++stepped;
+          } else {
+            ++record.skipped_batches;
+          }
+        } else {
+          ++record.skipped_batches;
+        }
+        ++batches_done_here;
+        if (on_progress) {
+          TrainerProgress progress;
+          progress.epoch = epoch;
+          progress.epochs = options.epochs;
+          progress.batch = b + 1;
+          progress.batches = batches;
+          progress.loss = stepped > 0 ? loss_sum / stepped : loss_value;
+          progress.seconds_elapsed =
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+          progress.seconds_remaining = progress.seconds_elapsed / batches_done_here *
+                                       (total_batches_here - batches_done_here);
+          on_progress(progress);
+        }
+      }
+      record.train_loss = stepped > 0 ? loss_sum / stepped : NAN;
+      record.train_rotation_loss = stepped > 0 ? rotation_loss_sum / stepped : NAN;
+      record.train_translation_loss = stepped > 0 ? translation_loss_sum / stepped : NAN;
+      record.sigma_rotation = sigma_r.item<double>();
+      record.sigma_translation = sigma_t.item<double>();
+
+      impl.network->eval();
+      absl::StatusOr<ValidationErrors> errors =
+          Validate(net, *validation_pairs, options.batch_size, options.passes);
+      if (!errors.ok()) return errors.status();
+      record.validation_rotation_rmse_deg = errors->rotation_rmse_deg;
+      record.validation_rotation_median_deg = errors->rotation_median_deg;
+      record.validation_translation_rmse = errors->translation_rmse;
+      record.seconds =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - epoch_start).count();
+
+      // Portable weights always on the CPU side of the file format; state last, so that a crash
+      // between the writes resumes from the previous epoch's consistent set.
+      if (absl::Status s = net.Save(last_path); !s.ok()) return s;
+      if (errors->rotation_rmse_deg < state.best_rotation_rmse_deg) {
+        state.best_rotation_rmse_deg = errors->rotation_rmse_deg;
+        if (absl::Status s = net.Save(best_path); !s.ok()) return s;
+      }
+      torch::save(optimizer, optimizer_path);
+      state.epochs_done = epoch;
+      if (absl::Status s =
+              WriteState(state_path, state, record.sigma_rotation, record.sigma_translation);
+          !s.ok()) {
+        return s;
+      }
+      log << record.epoch << "," << record.train_loss << "," << record.train_rotation_loss << ","
+          << record.train_translation_loss << "," << record.validation_rotation_rmse_deg << ","
+          << record.validation_rotation_median_deg << "," << record.validation_translation_rmse
+          << "," << record.sigma_rotation << "," << record.sigma_translation << ","
+          << record.learning_rate << "," << record.skipped_batches << "," << record.seconds << "\n";
+      log.flush();
+      records.push_back(record);
+      if (on_epoch) on_epoch(record);
+    }
+    impl.network->eval();
+    return records;
+  } catch (const c10::Error& e) {
+    return absl::InternalError(absl::StrCat("training failed: ", e.what_without_backtrace()));
+  }
+}
+
+}  // namespace rpsr::core
