@@ -10,6 +10,8 @@
 #include "absl/flags/parse.h"
 #include "absl/flags/usage.h"
 #include "absl/flags/usage_config.h"
+#include "absl/strings/match.h"
+#include "absl/strings/string_view.h"
 #include "client/cli/subcommands.h"
 
 namespace {
@@ -24,6 +26,9 @@ const std::map<std::string, Subcommand>& Subcommands() {
       {"train",
        {"train RPSRNet end to end on a seeded pair protocol (objects or LiDAR)",
         rpsr::client::RunTrainCommand}},
+      {"data",
+       {"write object clouds, simulated LiDAR sequences or registration pairs with a manifest",
+        rpsr::client::RunDataCommand}},
   };
   return *commands;
 }
@@ -50,15 +55,18 @@ int main(int argc, char** argv) {
     PrintUsage();
     return 2;
   }
-  // Flags are defined in <name>_command.cc: `--help` shows that file's flags only.
+  // Flags are defined in <name>_command.cc, and those several subcommands read in
+  // shared_flags.cc: `--help` shows these two files' flags only.
+  absl::FlagsUsageConfig usage_config;
+  usage_config.contains_help_flags = [name](absl::string_view file) {
+    return absl::EndsWith(file, "/" + name + "_command.cc") ||
+           absl::EndsWith(file, "/shared_flags.cc");
+  };
+  absl::SetFlagsUsageConfig(usage_config);
   std::vector<char*> args = {argv[0]};
-  std::string helpon = "--helpon=" + name + "_command";
+  std::string help = "--help";
   for (int i = 2; i < argc; ++i) {
-    if (std::strcmp(argv[i], "--help") == 0 || std::strcmp(argv[i], "-h") == 0) {
-      args.push_back(helpon.data());
-    } else {
-      args.push_back(argv[i]);
-    }
+    args.push_back(std::strcmp(argv[i], "-h") == 0 ? help.data() : argv[i]);
   }
   absl::SetProgramUsageMessage("rpsr " + name + " [flags]: " + it->second.summary);
   std::vector<char*> rest = absl::ParseCommandLine(static_cast<int>(args.size()), args.data());

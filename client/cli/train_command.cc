@@ -10,15 +10,14 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
 #include "client/cli/cli_progress.h"
+#include "client/cli/shared_flags.h"
 #include "client/cli/subcommands.h"
 #include "core/data/training_pairs.h"
 #include "core/net/rpsr_net.h"
 #include "core/net/trainer.h"
 
-ABSL_FLAG(std::string, protocol, "objects",
-          "objects: the paper's ModelNet-style protocol on procedural objects (M2 seen classes); "
-          "lidar: simulated HDL-64E pairs of frames i and i+5, half without ground");
-ABSL_FLAG(std::string, output, "", "folder for model.rpsrw, last.rpsrw, the state and the log");
+// --protocol, --output, --seed and --num_points are shared with other subcommands
+// (shared_flags.cc).
 ABSL_FLAG(int, epochs, 40, "epochs to train (a resumed run continues up to this many)");
 ABSL_FLAG(int, pairs_per_epoch, 4096, "training pairs per epoch (fresh pairs every epoch)");
 ABSL_FLAG(int, batch_size, 16, "pairs per optimisation step");
@@ -28,7 +27,6 @@ ABSL_FLAG(double, lr, 1e-3, "Adam learning rate");
 ABSL_FLAG(std::string, lr_milestones, "",
           "comma-separated epochs after which the rate is multiplied by 0.1 (default: at 60% "
           "and 85% of the epochs)");
-ABSL_FLAG(uint64_t, seed, 1, "seed of the weights and of the pair streams");
 ABSL_FLAG(std::string, device, "cpu", "cpu or cuda (when built against a CUDA LibTorch)");
 ABSL_FLAG(int, data_threads, 2, "threads generating pairs and building trees");
 ABSL_FLAG(int, threads, 1, "LibTorch intra-op threads");
@@ -36,7 +34,6 @@ ABSL_FLAG(bool, resume, true, "continue from the state in --output when present"
 ABSL_FLAG(int, embedding_width, 128, "token width E after Tree-to-Voxel");
 ABSL_FLAG(int, feedforward_width, 256, "Transformer feed-forward width");
 ABSL_FLAG(std::string, conv_widths, "32,64,128", "tree convolution widths at depths 5,4,3");
-ABSL_FLAG(int, num_points, 1024, "objects: points per cloud");
 ABSL_FLAG(double, disturbed_fraction, 0.3,
           "objects: fraction of training pairs with noise, outliers, a crop or jitter");
 
