@@ -212,7 +212,10 @@ std::pair<torch::Tensor, torch::Tensor> WeightedProcrustes(const torch::Tensor& 
   torch::Tensor tgt_mean = (w3 * tgt).sum(1, true);
   torch::Tensor src_c = src - src_mean;
   torch::Tensor tgt_c = tgt - tgt_mean;
-  torch::Tensor H = torch::matmul((w3 * src_c).transpose(1, 2), tgt_c);  // [B, 3, 3]
+  // The SVD runs in double: its gradient has 1 / (s_i^2 - s_j^2) terms that overflow float32
+  // for nearly symmetric correspondences and produced NaN steps in training.
+  const auto dtype = src.scalar_type();
+  torch::Tensor H = torch::matmul((w3 * src_c).transpose(1, 2), tgt_c).to(torch::kFloat64);
   auto [U, S, Vh] = torch::linalg_svd(H, /*full_matrices=*/false, c10::nullopt);
   torch::Tensor V = Vh.transpose(1, 2);
   torch::Tensor Ut = U.transpose(1, 2);
@@ -220,7 +223,7 @@ std::pair<torch::Tensor, torch::Tensor> WeightedProcrustes(const torch::Tensor& 
   torch::Tensor det = torch::linalg_det(torch::matmul(V, Ut));
   torch::Tensor ones = torch::ones_like(det);
   torch::Tensor diag = torch::stack({ones, ones, torch::sign(det) + (det == 0).to(det.dtype())}, 1);
-  torch::Tensor R = torch::matmul(V * diag.unsqueeze(1), Ut);
+  torch::Tensor R = torch::matmul(V * diag.unsqueeze(1), Ut).to(dtype);
   torch::Tensor t = tgt_mean.squeeze(1) - torch::matmul(R, src_mean.transpose(1, 2)).squeeze(-1);
   return {R, t};
 }
