@@ -15,7 +15,7 @@ if command -v clang-format >/dev/null; then
   if [ ${#sources[@]} -gt 0 ]; then
     if ! clang-format --dry-run --Werror "${sources[@]}" 2>/tmp/rpsr-format.log; then
       echo "tests/run.sh: clang-format finds unformatted files (run clang-format -i on them):" >&2
-      grep -o '^[^:]*:' /tmp/rpsr-format.log | sort -u >&2
+      grep -oE '^[^: ]+\.(h|cc):' /tmp/rpsr-format.log | sort -u >&2
       exit 1
     fi
   fi

@@ -19,7 +19,8 @@ TEST(ValidatePointCloudTest, AcceptsFiniteCloud) {
 
 TEST(ValidatePointCloudTest, NamesFirstNonFinitePoint) {
   PointCloud cloud;
-  cloud.points = {{0, 0, 0}, {1, std::numeric_limits<float>::quiet_NaN(), 3},
+  cloud.points = {{0, 0, 0},
+                  {1, std::numeric_limits<float>::quiet_NaN(), 3},
                   {std::numeric_limits<float>::infinity(), 0, 0}};
   absl::Status status = ValidatePointCloud(cloud);
   EXPECT_EQ(status.code(), absl::StatusCode::kInvalidArgument);
