@@ -21,6 +21,24 @@ absl::Status ValidatePointCloud(const PointCloud& cloud) {
   return absl::OkStatus();
 }
 
+absl::Status ValidateTriangleMesh(const TriangleMesh& mesh) {
+  for (size_t v = 0; v < mesh.vertices.size(); ++v) {
+    if (!mesh.vertices[v].allFinite()) {
+      return absl::InvalidArgumentError(absl::StrCat("mesh vertex ", v, " is not finite"));
+    }
+  }
+  const int64_t num_vertices = static_cast<int64_t>(mesh.vertices.size());
+  for (size_t t = 0; t < mesh.triangles.size(); ++t) {
+    const Eigen::Vector3i& tri = mesh.triangles[t];
+    if ((tri.array() < 0).any() || (tri.cast<int64_t>().array() >= num_vertices).any()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("mesh triangle ", t, " indexes vertex (", tri.x(), ", ", tri.y(), ", ",
+                       tri.z(), ") but the mesh has ", num_vertices, " vertices"));
+    }
+  }
+  return absl::OkStatus();
+}
+
 Eigen::AlignedBox3f BoundsOf(const std::vector<Eigen::Vector3f>& points) {
   Eigen::AlignedBox3f box;  // Default-constructed: empty (min = +max float, max = lowest).
   for (const Eigen::Vector3f& p : points) box.extend(p);

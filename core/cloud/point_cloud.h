@@ -35,6 +35,10 @@ struct TriangleMesh {
 // InvalidArgument naming the first offending point index and value.
 absl::Status ValidatePointCloud(const PointCloud& cloud);
 
+// OK when every vertex is finite and every triangle indexes existing vertices; otherwise
+// InvalidArgument naming the first offending vertex or triangle.
+absl::Status ValidateTriangleMesh(const TriangleMesh& mesh);
+
 // Axis-aligned bounds of `points`; for an empty set an empty box (`isEmpty()` is true).
 Eigen::AlignedBox3f BoundsOf(const std::vector<Eigen::Vector3f>& points);
 

@@ -17,23 +17,13 @@ double UniformUnit(std::mt19937_64& rng) { return (rng() >> 11) * (1.0 / 9007199
 
 absl::StatusOr<PointCloud> SampleSurface(const TriangleMesh& mesh, size_t num_points,
                                          uint64_t seed) {
-  for (size_t v = 0; v < mesh.vertices.size(); ++v) {
-    if (!mesh.vertices[v].allFinite()) {
-      return absl::InvalidArgumentError(absl::StrCat("mesh vertex ", v, " is not finite"));
-    }
-  }
-  const int num_vertices = static_cast<int>(mesh.vertices.size());
+  if (absl::Status valid = ValidateTriangleMesh(mesh); !valid.ok()) return valid;
   // Cumulative areas, in double so that millions of small triangles do not lose the tail.
   std::vector<double> cumulative_area;
   cumulative_area.reserve(mesh.triangles.size());
   double total = 0.0;
   for (size_t t = 0; t < mesh.triangles.size(); ++t) {
     const Eigen::Vector3i& tri = mesh.triangles[t];
-    if ((tri.array() < 0).any() || (tri.array() >= num_vertices).any()) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("mesh triangle ", t, " indexes vertex (", tri.x(), ", ", tri.y(), ", ",
-                       tri.z(), ") but the mesh has ", num_vertices, " vertices"));
-    }
     const Eigen::Vector3d a = mesh.vertices[tri.x()].cast<double>();
     const Eigen::Vector3d b = mesh.vertices[tri.y()].cast<double>();
     const Eigen::Vector3d c = mesh.vertices[tri.z()].cast<double>();

@@ -190,20 +190,7 @@ absl::StatusOr<TriangleMesh> ReadOff(const std::string& path) {
 }
 
 absl::StatusOr<std::string> SerializeOff(const TriangleMesh& mesh) {
-  for (size_t v = 0; v < mesh.vertices.size(); ++v) {
-    if (!mesh.vertices[v].allFinite()) {
-      return absl::InvalidArgumentError(absl::StrCat("mesh vertex ", v, " is not finite"));
-    }
-  }
-  const int64_t num_vertices = static_cast<int64_t>(mesh.vertices.size());
-  for (size_t t = 0; t < mesh.triangles.size(); ++t) {
-    const Eigen::Vector3i& tri = mesh.triangles[t];
-    if ((tri.array() < 0).any() || (tri.cast<int64_t>().array() >= num_vertices).any()) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("mesh triangle ", t, " indexes vertex (", tri.x(), ", ", tri.y(), ", ",
-                       tri.z(), ") but the mesh has ", num_vertices, " vertices"));
-    }
-  }
+  if (absl::Status valid = ValidateTriangleMesh(mesh); !valid.ok()) return valid;
   std::string out = absl::StrCat("OFF\n", mesh.vertices.size(), " ", mesh.triangles.size(), " 0\n");
   for (const Eigen::Vector3f& v : mesh.vertices) {
     io_internal::AppendShortestDecimal(v.x(), &out);
