@@ -1,49 +1,36 @@
-// Speed and memory of building Barnes-Hut trees: a LiDAR-like scan of 120k points (the service's
-// main load) and a 2,048-point object. Counters: nodes in the tree, bytes it holds, and
-// bytes_vs_xyz = tree bytes / raw float32 xyz bytes (what the session cache pays per cloud).
+// Speed and memory of building Barnes-Hut trees: a simulated 120k-point LiDAR scan (the service's
+// main load) and a 2,048-point object. Counters: nodes in the tree,
+// bytes it holds, and bytes_vs_xyz = tree bytes / raw float32 xyz bytes (what the session cache
+// pays per cloud).
 //
 //   build/tests/bench/bh_tree_bench --benchmark_counters_tabular=true
 #include <cmath>
+#include <cstdlib>
 #include <random>
 #include <vector>
 
 #include "benchmark/benchmark.h"
+#include "core/synth/lidar_sequence.h"
 #include "core/tree/bh_tree.h"
 
 namespace rpsr::core {
 namespace {
 
-// An analytic HDL-64E-like scan, self-contained so the benchmark does not depend on the
-// simulator: 64 beams from +2 to -24.8 degrees, `azimuth_steps` rays each, hitting a ground
-// plane 1.73 m below the sensor, facades 9-14 m to the sides, and poles; 2 cm range noise.
-PointCloud MakeLidarLikeScan(int num_points, uint64_t seed) {
-  std::mt19937_64 rng(seed);
-  std::normal_distribution<float> noise(0.0f, 0.02f);
-  const int beams = 64;
-  const int azimuth_steps = num_points / beams;
+// A simulated HDL-64E scan of an urban street (core/synth's simulator: facades, cars, poles,
+// trees, ground), the service's main load: frame 10 of a seeded sequence, simulated with 2,400
+// azimuth steps (~140k points) and thinned by an even stride to exactly `num_points`.
+PointCloud SimulatedUrbanScan(size_t num_points) {
+  LidarSequenceOptions options;
+  options.frame_count = 20;
+  options.seed = 1;
+  options.sensor.azimuth_steps = 2400;
+  auto simulator = LidarSequenceSimulator::Create(options);
+  if (!simulator.ok()) std::abort();
+  const PointCloud full = simulator->SimulateFrame(10).cloud;
+  if (full.size() < num_points) std::abort();
   PointCloud cloud;
-  cloud.points.reserve(num_points);
-  for (int b = 0; b < beams; ++b) {
-    const double elevation = (2.0 - 26.8 * b / (beams - 1)) * M_PI / 180.0;
-    for (int s = 0; s < azimuth_steps; ++s) {
-      const double azimuth = 2.0 * M_PI * s / azimuth_steps;
-      const Eigen::Vector3d dir(std::cos(elevation) * std::cos(azimuth),
-                                std::cos(elevation) * std::sin(azimuth), std::sin(elevation));
-      double range = 120.0;
-      if (dir.z() < 0) range = std::min(range, -1.73 / dir.z());
-      const double wall = dir.y() > 0 ? 9.0 + 0.5 * std::sin(0.1 * s) : -14.0;
-      if (std::abs(dir.y()) > 1e-6) {
-        const double t = wall / dir.y();
-        if (t > 0) range = std::min(range, t);
-      }
-      // Poles every 15 m along x at y = 6.
-      const double pole_x = 15.0 * std::round(range * dir.x() / 15.0);
-      if (std::abs(dir.y()) > 1e-6 && dir.y() > 0) {
-        const double t = 6.0 / dir.y();
-        if (t < range && std::abs(t * dir.x() - pole_x) < 0.15) range = t;
-      }
-      cloud.points.push_back(((range + noise(rng)) * dir).cast<float>());
-    }
+  for (size_t i = 0; i < num_points; ++i) {
+    cloud.points.push_back(full.points[i * full.size() / num_points]);
   }
   return cloud;
 }
@@ -84,48 +71,32 @@ void BuildAndReport(benchmark::State& state, const PointCloud& cloud,
   ReportTree(state, cloud, *BuildOctree(cloud, options));
 }
 
-// Full tree: neighbour tables at every depth.
+// neighbor_depth 99 (capped at depth): neighbour tables at every depth. neighbor_depth = 5 is what the
+// service caches for a LiDAR scan: deep levels for refinement, neighbour tables only where the
+// network's tree convolutions gather.
 void BM_BuildTreeLidar(benchmark::State& state) {
-  const PointCloud cloud = MakeLidarLikeScan(static_cast<int>(state.range(0)), 1);
+  const PointCloud cloud = SimulatedUrbanScan(static_cast<size_t>(state.range(0)));
   BarnesHutTreeOptions options;
   options.max_depth = static_cast<int>(state.range(1));
-  options.neighbor_max_depth = options.max_depth;
+  options.neighbor_max_depth = static_cast<int>(state.range(2));
   BuildAndReport(state, cloud, options);
 }
 BENCHMARK(BM_BuildTreeLidar)
-    ->ArgNames({"points", "depth"})
-    ->Args({120000, 6})
-    ->Args({120000, 8})
-    ->Args({120000, 9})
-    ->Args({120000, 10})
-    ->Unit(benchmark::kMillisecond);
-
-// What the service caches for a LiDAR scan: deep levels for refinement, neighbour tables only
-// where the network's tree convolutions gather (depths <= 5).
-void BM_BuildTreeLidarCached(benchmark::State& state) {
-  const PointCloud cloud = MakeLidarLikeScan(static_cast<int>(state.range(0)), 1);
-  BarnesHutTreeOptions options;
-  options.max_depth = static_cast<int>(state.range(1));
-  options.neighbor_max_depth = 5;
-  BuildAndReport(state, cloud, options);
-}
-BENCHMARK(BM_BuildTreeLidarCached)
-    ->ArgNames({"points", "depth"})
-    ->Args({120000, 6})
-    ->Args({120000, 8})
-    ->Args({120000, 9})
-    ->Args({120000, 10})
+    ->ArgNames({"points", "depth", "neighbor_depth"})
+    ->ArgsProduct({{120000}, {6, 8, 9, 10}, {5}})
+    ->ArgsProduct({{120000}, {6, 8, 9, 10}, {99}})
     ->Unit(benchmark::kMillisecond);
 
 void BM_BuildTreeObject(benchmark::State& state) {
   const PointCloud cloud = MakeObject(static_cast<int>(state.range(0)), 2);
   BarnesHutTreeOptions options;
   options.max_depth = static_cast<int>(state.range(1));
+  options.neighbor_max_depth = static_cast<int>(state.range(2));
   BuildAndReport(state, cloud, options);
 }
 BENCHMARK(BM_BuildTreeObject)
-    ->ArgNames({"points", "depth"})
-    ->Args({2048, 6})
+    ->ArgNames({"points", "depth", "neighbor_depth"})
+    ->Args({2048, 6, 5})
     ->Unit(benchmark::kMicrosecond);
 
 }  // namespace
