@@ -35,7 +35,9 @@ packages=(
   libeigen3-dev libabsl-dev prometheus-cpp-dev libcivetweb-dev
   libgtest-dev libgmock-dev libbenchmark-dev libnanoflann-dev
   libhdf5-dev libpng-dev
-  clang clang-format
+  # clang + its sanitizer/libFuzzer runtime build the PLY and PCD fuzzers (tests/fuzz/);
+  # clang-format checks the style in tests/run.sh.
+  clang clang-format libclang-rt-14-dev
 )
 if [ "$with_peers" -eq 1 ]; then packages+=(libopen3d-dev libpcl-dev); fi
 
