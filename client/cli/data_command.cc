@@ -44,11 +44,6 @@
 
 // --output, --protocol, --seed and --num_points are shared with other subcommands
 // (shared_flags.cc).
-ABSL_FLAG(int, count, 100, "objects, pairs --protocol objects: clouds or pairs to write");
-ABSL_FLAG(std::string, split, "",
-          "objects: m1 (all 24 families, the default), seen or unseen (the halves of the "
-          "paper's M2 split); pairs --protocol lidar: train, test (the default) or validation "
-          "(the 70/20/10% blocks of each sequence)");
 ABSL_FLAG(std::string, format, "",
           "cloud files: ply, pcd, xyz or bin (KITTI float32 x y z r); default ply for objects, "
           "bin for LiDAR pairs");
@@ -56,12 +51,6 @@ ABSL_FLAG(std::string, mesh_folder, "",
           "objects and object pairs: sample the .off/.ply meshes of this folder (searched "
           "recursively, sorted by path; pair i uses mesh i modulo their number) instead of the "
           "procedural families; --split is then ignored");
-ABSL_FLAG(std::string, disturbance, "none",
-          "pairs --protocol objects: what is done to the source: none, noise, outliers, crop "
-          "or jitter");
-ABSL_FLAG(int, level, 2,
-          "pairs --protocol objects: disturbance level 0..4 (noise/outliers 1,5,10,20,40% of "
-          "the points; crop 1,10,20,30,40%; jitter tolerance 0.01,0.02,0.03,0.05,0.08)");
 ABSL_FLAG(bool, same_points, false,
           "pairs --protocol objects: the target is the clean source mapped by the ground truth, "
           "point for point (default: independent samples of the surface)");
@@ -302,20 +291,11 @@ int RunObjects() {
   return 0;
 }
 
-std::optional<core::DisturbanceKind> ParseDisturbance(const std::string& name) {
-  if (name == "none") return core::DisturbanceKind::kNone;
-  if (name == "noise") return core::DisturbanceKind::kGaussianNoise;
-  if (name == "outliers") return core::DisturbanceKind::kUniformOutliers;
-  if (name == "crop") return core::DisturbanceKind::kCrop;
-  if (name == "jitter") return core::DisturbanceKind::kJitter;
-  return std::nullopt;
-}
-
 int RunObjectPairs() {
   ObjectSource source;
   if (int code = ReadObjectSource(source); code != 0) return code;
   const std::string disturbance = absl::AsciiStrToLower(absl::GetFlag(FLAGS_disturbance));
-  std::optional<core::DisturbanceKind> kind = ParseDisturbance(disturbance);
+  std::optional<core::DisturbanceKind> kind = ParseDisturbanceFlag(disturbance);
   if (!kind) {
     return Fail(kBadFlags, absl::StrCat("unknown --disturbance '", disturbance,
                                         "': use none, noise, outliers, crop or jitter"));

@@ -23,6 +23,9 @@ struct Subcommand {
 
 const std::map<std::string, Subcommand>& Subcommands() {
   static const auto* commands = new std::map<std::string, Subcommand>{
+      {"eval",
+       {"run the network on pairs (a manifest or the object protocol) and report its errors",
+        rpsr::client::RunEvalCommand}},
       {"train",
        {"train RPSRNet end to end on a seeded pair protocol (objects or LiDAR)",
         rpsr::client::RunTrainCommand}},

@@ -15,3 +15,34 @@ ABSL_FLAG(uint64_t, seed, 1,
           "seed of everything drawn at random (train: weights and pair streams; data: objects, "
           "poses, disturbances, simulated streets and the choice of --max_pairs)");
 ABSL_FLAG(int, num_points, 1024, "objects: points sampled per cloud");
+ABSL_FLAG(int, count, 100,
+          "data objects / data pairs --protocol objects: clouds or pairs to write; eval "
+          "--protocol objects: pairs per setting");
+ABSL_FLAG(std::string, split, "",
+          "objects: m1 (all 24 families, the default of data), seen or unseen (the halves of the "
+          "paper's M2 split; eval's default: unseen); pairs --protocol lidar: train, test (the "
+          "default) or validation (the 70/20/10% blocks of each sequence)");
+ABSL_FLAG(std::string, disturbance, "none",
+          "object pairs (data pairs, eval): what is done to the source: none, noise, outliers, "
+          "crop or jitter");
+ABSL_FLAG(int, level, 2,
+          "object pairs (data pairs, eval): disturbance level 0..4 (noise/outliers "
+          "1,5,10,20,40% of the points; crop 1,10,20,30,40%; jitter tolerance "
+          "0.01,0.02,0.03,0.05,0.08)");
+ABSL_FLAG(int, batch_size, 16, "pairs per forward pass (train: per optimisation step)");
+ABSL_FLAG(int, passes, 0,
+          "network passes (Sec. 3.3); 0: 3 for train, the model's own number for eval");
+ABSL_FLAG(int, threads, 1, "LibTorch intra-op threads");
+
+namespace rpsr::client {
+
+std::optional<core::DisturbanceKind> ParseDisturbanceFlag(const std::string& name) {
+  if (name == "none") return core::DisturbanceKind::kNone;
+  if (name == "noise") return core::DisturbanceKind::kGaussianNoise;
+  if (name == "outliers") return core::DisturbanceKind::kUniformOutliers;
+  if (name == "crop") return core::DisturbanceKind::kCrop;
+  if (name == "jitter") return core::DisturbanceKind::kJitter;
+  return std::nullopt;
+}
+
+}  // namespace rpsr::client

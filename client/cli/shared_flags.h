@@ -6,13 +6,29 @@
 #define RPSR_CLIENT_CLI_SHARED_FLAGS_H_
 
 #include <cstdint>
+#include <optional>
 #include <string>
 
 #include "absl/flags/declare.h"
+#include "core/data/disturbances.h"
 
 ABSL_DECLARE_FLAG(std::string, output);
 ABSL_DECLARE_FLAG(std::string, protocol);
 ABSL_DECLARE_FLAG(uint64_t, seed);
 ABSL_DECLARE_FLAG(int, num_points);
+ABSL_DECLARE_FLAG(int, count);
+ABSL_DECLARE_FLAG(std::string, split);
+ABSL_DECLARE_FLAG(std::string, disturbance);
+ABSL_DECLARE_FLAG(int, level);
+ABSL_DECLARE_FLAG(int, batch_size);
+ABSL_DECLARE_FLAG(int, passes);
+ABSL_DECLARE_FLAG(int, threads);
+
+namespace rpsr::client {
+
+// The --disturbance names: none, noise, outliers, crop, jitter; nullopt for anything else.
+std::optional<core::DisturbanceKind> ParseDisturbanceFlag(const std::string& name);
+
+}  // namespace rpsr::client
 
 #endif  // RPSR_CLIENT_CLI_SHARED_FLAGS_H_

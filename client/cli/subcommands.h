@@ -9,6 +9,7 @@
 namespace rpsr::client {
 
 int RunDataCommand(const std::vector<std::string>& args);
+int RunEvalCommand(const std::vector<std::string>& args);
 int RunTrainCommand(const std::vector<std::string>& args);
 
 }  // namespace rpsr::client

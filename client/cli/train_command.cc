@@ -20,16 +20,13 @@
 // (shared_flags.cc).
 ABSL_FLAG(int, epochs, 40, "epochs to train (a resumed run continues up to this many)");
 ABSL_FLAG(int, pairs_per_epoch, 4096, "training pairs per epoch (fresh pairs every epoch)");
-ABSL_FLAG(int, batch_size, 16, "pairs per optimisation step");
 ABSL_FLAG(int, validation_pairs, 256, "held-out pairs evaluated after every epoch");
-ABSL_FLAG(int, passes, 3, "network passes per pair (Sec. 3.3)");
 ABSL_FLAG(double, lr, 1e-3, "Adam learning rate");
 ABSL_FLAG(std::string, lr_milestones, "",
           "comma-separated epochs after which the rate is multiplied by 0.1 (default: at 60% "
           "and 85% of the epochs)");
 ABSL_FLAG(std::string, device, "cpu", "cpu or cuda (when built against a CUDA LibTorch)");
 ABSL_FLAG(int, data_threads, 2, "threads generating pairs and building trees");
-ABSL_FLAG(int, threads, 1, "LibTorch intra-op threads");
 ABSL_FLAG(bool, resume, true, "continue from the state in --output when present");
 ABSL_FLAG(int, embedding_width, 128, "token width E after Tree-to-Voxel");
 ABSL_FLAG(int, feedforward_width, 256, "Transformer feed-forward width");
@@ -70,7 +67,7 @@ int RunTrainCommand(const std::vector<std::string>& /*args*/) {
   options.pairs_per_epoch = absl::GetFlag(FLAGS_pairs_per_epoch);
   options.batch_size = absl::GetFlag(FLAGS_batch_size);
   options.validation_pairs = absl::GetFlag(FLAGS_validation_pairs);
-  options.passes = absl::GetFlag(FLAGS_passes);
+  options.passes = absl::GetFlag(FLAGS_passes) > 0 ? absl::GetFlag(FLAGS_passes) : 3;
   options.learning_rate = absl::GetFlag(FLAGS_lr);
   options.seed = absl::GetFlag(FLAGS_seed);
   options.output_dir = output;

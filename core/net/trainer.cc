@@ -18,6 +18,7 @@
 #include "absl/strings/str_split.h"
 #include "core/data/transform_convention.h"
 #include "core/io/file_bytes.h"
+#include "core/net/registration_loss.h"
 #include "core/net/rpsr_net_impl.h"
 
 namespace rpsr::core {
@@ -325,15 +326,10 @@ absl::StatusOr<std::vector<EpochRecord>> TrainRpsrNet(
           torch::Tensor R = torch::matmul(out.rotation, R_prev);
           torch::Tensor t =
               torch::matmul(out.rotation, t_prev.unsqueeze(-1)).squeeze(-1) + out.translation;
-          rotation_loss = (torch::matmul(R.transpose(1, 2), R_gt) -
-                           torch::eye(3, torch::TensorOptions().device(device)))
-                              .pow(2)
-                              .sum({1, 2})
-                              .mean();
-          translation_loss = (t - t_gt).pow(2).sum(1).mean();
-          torch::Tensor pass_loss = torch::exp(-sigma_r) * rotation_loss + sigma_r +
-                                    torch::exp(-sigma_t) * translation_loss + sigma_t;
-          loss = loss + std::pow(0.5, pass) * pass_loss;
+          net::PassLoss pass_loss = net::RegistrationPassLoss(R, t, R_gt, t_gt, sigma_r, sigma_t);
+          rotation_loss = pass_loss.rotation;
+          translation_loss = pass_loss.translation;
+          loss = loss + net::PassWeight(pass) * pass_loss.combined;
           estimates = net::ToIsometries(R, t);
         }
         const double loss_value = loss.item<double>();
