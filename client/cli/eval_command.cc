@@ -2,8 +2,11 @@
 // rotation angle and translation distance, RMSE / MAE / median, recall at thresholds, time.
 // Pairs come from a manifest (`rpsr data pairs ...`) or from the object protocol directly,
 // where --study runs the paper's ModelNet study (clean + four disturbances x five levels).
+#include <cerrno>
 #include <chrono>
 #include <cstdio>
+#include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <optional>
 #include <string>
@@ -210,9 +213,13 @@ int RunEvalCommand(const std::vector<std::string>& /*args*/) {
     return settings.status().code() == absl::StatusCode::kInvalidArgument ? 2 : 1;
   }
 
+  const std::filesystem::path parent = std::filesystem::path(output).parent_path();
+  std::error_code ec;
+  if (!parent.empty()) std::filesystem::create_directories(parent, ec);
   std::ofstream rows(output);
-  if (!rows) {
-    std::fprintf(stderr, "rpsr eval: cannot write %s\n", output.c_str());
+  if (ec || !rows) {
+    std::fprintf(stderr, "rpsr eval: cannot write %s (%s)\n", output.c_str(),
+                 ec ? ec.message().c_str() : std::strerror(errno));
     return 1;
   }
   rows << "setting,source,target,T_target_source,score_peak,time_ms,rotation_error_deg,"
