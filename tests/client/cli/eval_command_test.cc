@@ -1,0 +1,118 @@
+// End to end: `rpsr data pairs` writes a manifest, `rpsr eval` registers it with the shipped model
+// and writes per-pair rows and summaries whose numbers agree with each other.
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+
+namespace rpsr::client {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+class EvalCommandTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const testing::TestInfo* info = testing::UnitTest::GetInstance()->current_test_info();
+    dir_ =
+        fs::temp_directory_path() / absl::StrCat("rpsr_eval_command_", info->name(), "_", getpid());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  int Run(const std::string& args) {
+    const fs::path log = dir_ / "stderr.txt";
+    const std::string command = absl::StrCat("OMP_WAIT_POLICY=PASSIVE ", RPSR_CLI_BINARY, " ", args,
+                                             " 2>", log.string(), " >/dev/null");
+    const int status = std::system(command.c_str());
+    stderr_ = Read(log.string());
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  }
+  static std::string Read(const std::string& path) {
+    std::ifstream in(path);
+    std::ostringstream text;
+    text << in.rdbuf();
+    return text.str();
+  }
+  std::string Path(const std::string& name) const { return (dir_ / name).string(); }
+
+  fs::path dir_;
+  std::string stderr_;
+};
+
+TEST_F(EvalCommandTest, ManifestRowsAndSummaryAgree) {
+  ASSERT_EQ(Run(absl::StrCat("data pairs --protocol objects --count 6 --split unseen --seed 5 "
+                             "--output ",
+                             Path("pairs"))),
+            0)
+      << stderr_;
+  ASSERT_EQ(Run(absl::StrCat("eval --manifest ", Path("pairs/manifest.csv"), " --batch_size 4 ",
+                             "--output ", Path("out/eval.csv"))),
+            0)
+      << stderr_;
+  // Per-pair rows: 16 numbers, finite errors.
+  std::vector<std::string> lines =
+      absl::StrSplit(Read(Path("out/eval.csv")), '\n', absl::SkipEmpty());
+  ASSERT_EQ(lines.size(), 7u);
+  double sum_sq = 0.0;
+  for (size_t i = 1; i < lines.size(); ++i) {
+    std::vector<std::string> fields = absl::StrSplit(lines[i], ',');
+    ASSERT_EQ(fields.size(), 8u) << lines[i];
+    EXPECT_EQ(std::vector<std::string>(absl::StrSplit(fields[3], ' ')).size(), 16u);
+    double rotation = 0.0;
+    ASSERT_TRUE(absl::SimpleAtod(fields[6], &rotation)) << fields[6];
+    EXPECT_GE(rotation, 0.0);
+    EXPECT_LE(rotation, 180.0);
+    sum_sq += rotation * rotation;
+  }
+  // The summary's RMSE is the rows' RMSE.
+  std::vector<std::string> summary =
+      absl::StrSplit(Read(Path("out/eval.csv.summary.csv")), '\n', absl::SkipEmpty());
+  ASSERT_EQ(summary.size(), 2u);
+  std::vector<std::string> fields = absl::StrSplit(summary[1], ',');
+  double rmse = 0.0;
+  ASSERT_TRUE(absl::SimpleAtod(fields[2], &rmse));
+  EXPECT_NEAR(rmse, std::sqrt(sum_sq / 6.0), 1e-3 * (1 + rmse));
+  EXPECT_EQ(fields[1], "6");
+  EXPECT_THAT(Read(Path("out/eval.csv.summary.json")), HasSubstr("\"rotation_rmse_deg\""));
+}
+
+TEST_F(EvalCommandTest, StudyHasTheTwentyOneSettings) {
+  ASSERT_EQ(Run(absl::StrCat("eval --protocol objects --study --count 1 --num_points 256 ",
+                             "--output ", Path("study.csv"))),
+            0)
+      << stderr_;
+  std::vector<std::string> summary =
+      absl::StrSplit(Read(Path("study.csv.summary.csv")), '\n', absl::SkipEmpty());
+  EXPECT_EQ(summary.size(), 1u + 21u);
+}
+
+TEST_F(EvalCommandTest, BadInputSaysWhatToFix) {
+  EXPECT_EQ(Run("eval --count 1"), 2);
+  EXPECT_THAT(stderr_, HasSubstr("--output"));
+  EXPECT_EQ(Run(absl::StrCat("eval --mode refine --output ", Path("x.csv"))), 2);
+  EXPECT_THAT(stderr_, HasSubstr("not available yet"));
+  EXPECT_EQ(Run(absl::StrCat("eval --model ", Path("missing.rpsrw"), " --output ", Path("x.csv"))),
+            1);
+  EXPECT_THAT(stderr_, HasSubstr("missing.rpsrw"));
+  EXPECT_EQ(Run(absl::StrCat("eval --manifest ", Path("none.csv"), " --output ", Path("x.csv"))),
+            1);
+  EXPECT_THAT(stderr_, HasSubstr("none.csv"));
+}
+
+}  // namespace
+}  // namespace rpsr::client
