@@ -20,6 +20,7 @@
 #include "core/io/file_bytes.h"
 #include "core/net/registration_loss.h"
 #include "core/net/rpsr_net_impl.h"
+#include "core/net/weights_file.h"
 
 namespace rpsr::core {
 namespace {
@@ -231,15 +232,16 @@ absl::StatusOr<std::vector<EpochRecord>> TrainRpsrNet(
         options.resume && std::filesystem::exists(state_path) && std::filesystem::exists(last_path);
     if (resuming) {
       if (absl::Status s = ReadState(state_path, state, sigma_r0, sigma_t0); !s.ok()) return s;
-      absl::StatusOr<std::unique_ptr<RpsrNet>> last = RpsrNet::Load(last_path);
-      if (!last.ok()) return last.status();
-      torch::NoGradGuard no_grad;
-      auto from = (*last)->impl().network->named_parameters();
-      for (auto& item : impl.network->named_parameters())
-        item.value().copy_(*from.find(item.key()));
-      auto from_buffers = (*last)->impl().network->named_buffers();
-      for (auto& item : impl.network->named_buffers()) {
-        item.value().copy_(*from_buffers.find(item.key()));
+      // Through the weights file's checks: a run resumed with other architecture flags gets a
+      // clear error instead of a mismatched copy.
+      absl::StatusOr<std::string> bytes = ReadFileBytes(last_path, size_t{1} << 30);
+      if (!bytes.ok()) return bytes.status();
+      absl::StatusOr<net::NamedTensors> weights = net::ParseWeights(*bytes, last_path);
+      if (!weights.ok()) return weights.status();
+      if (absl::Status s = net::LoadTensorsInto(*weights, *impl.network); !s.ok()) {
+        return absl::FailedPreconditionError(
+            absl::StrCat(last_path, ": ", s.message(),
+                         "; resume with the flags of the original run or use a new --output"));
       }
     }
     impl.network->to(device);
