@@ -1,0 +1,481 @@
+#include "core/refine/tree_refinement.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "Eigen/Cholesky"
+#include "Eigen/Eigenvalues"
+#include "absl/container/flat_hash_map.h"
+#include "absl/status/status.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
+#include "core/tree/morton.h"
+
+namespace rpsr::core {
+namespace {
+
+using Matrix6d = Eigen::Matrix<double, 6, 6>;
+using Vector6d = Eigen::Matrix<double, 6, 1>;
+
+double SecondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+Eigen::Isometry3d MakeIsometry(const Eigen::Matrix3d& R, const Eigen::Vector3d& t) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = R;
+  T.translation() = t;
+  return T;
+}
+
+Eigen::Matrix3d Skew(const Eigen::Vector3d& a) {
+  Eigen::Matrix3d m;
+  m << 0.0, -a.z(), a.y(), a.z(), 0.0, -a.x(), -a.y(), a.x(), 0.0;
+  return m;
+}
+
+// A node's covariance regularised as in GICP, in metres^2: eigenvalues (eps, 1, 1) * edge^2
+// along the eigenvectors of the node's shape (the smallest is the surface normal). A node with
+// too few points to have a shape borrows it from its nearest ancestor that has enough (the
+// parent's patch of the same surface): deep levels of sparse clouds are mostly such nodes, and
+// making them isotropic would hand every plane information along itself (a plane would look
+// constrained in-plane). Only when even the root lacks points is it isotropic, edge^2 * I.
+struct RegularizedNode {
+  Eigen::Matrix3d covariance;
+  Eigen::Vector3d normal = Eigen::Vector3d::Zero();
+  bool planar = false;
+};
+
+RegularizedNode Regularize(const Octree& tree, int depth, int node, double edge,
+                           const TreeRefinementOptions& options) {
+  RegularizedNode out;
+  const double edge2 = edge * edge;
+  int shape_depth = depth;
+  int shape_node = node;
+  while (static_cast<int>(tree.level(shape_depth).count[shape_node]) <
+             options.min_count_for_covariance &&
+         shape_depth > 0) {
+    shape_node = tree.level(shape_depth).parent[shape_node];
+    --shape_depth;
+  }
+  if (static_cast<int>(tree.level(shape_depth).count[shape_node]) <
+      options.min_count_for_covariance) {
+    out.covariance = edge2 * Eigen::Matrix3d::Identity();
+    return out;
+  }
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
+  solver.computeDirect(tree.Covariance(shape_depth, shape_node).cast<double>());
+  const Eigen::Matrix3d& v = solver.eigenvectors();  // columns, eigenvalues ascending
+  const Eigen::Vector3d values(options.covariance_epsilon, 1.0, 1.0);
+  out.covariance = edge2 * v * values.asDiagonal() * v.transpose();
+  out.normal = v.col(0);
+  out.planar = true;
+  return out;
+}
+
+// What one depth needs, prepared once per call: the chosen source nodes with their regularised
+// covariances and prior weights, and a hash from the target's Morton codes to node indices (the
+// target does not move, so the lookup is built once per depth).
+struct DepthData {
+  int depth = 0;
+  double edge_target = 0.0;
+  std::vector<int32_t> source_nodes;
+  std::vector<Eigen::Vector3d> source_mean;
+  std::vector<Eigen::Matrix3d> source_covariance;
+  std::vector<double> source_prior;  // inverse density, count or 1 (see WeightScheme)
+  absl::flat_hash_map<uint64_t, int32_t> target_index;
+  // Lazily regularised target nodes (only those ever matched pay the eigen-decomposition).
+  std::vector<RegularizedNode> target_regularized;
+  std::vector<uint8_t> target_ready;
+};
+
+double EdgeOf(const Octree& tree, int depth) {
+  return 2.0 * tree.half_length() / static_cast<double>(uint64_t{1} << depth);
+}
+
+DepthData PrepareDepth(const Octree& source, const Octree& target, int depth,
+                       const TreeRefinementOptions& options) {
+  DepthData data;
+  data.depth = depth;
+  data.edge_target = EdgeOf(target, depth);
+  const double edge_source = EdgeOf(source, depth);
+  const Octree::Level& s = source.level(depth);
+  const size_t n = s.size();
+  const size_t used = std::min(n, static_cast<size_t>(options.max_source_nodes_per_depth));
+  data.source_nodes.reserve(used);
+  for (size_t k = 0; k < used; ++k) {
+    // Even stride over the Morton order: spatially spread, deterministic.
+    data.source_nodes.push_back(static_cast<int32_t>(k * n / used));
+  }
+  data.source_mean.reserve(used);
+  data.source_covariance.reserve(used);
+  data.source_prior.reserve(used);
+  for (int32_t node : data.source_nodes) {
+    data.source_mean.push_back(s.center_of_mass[node].cast<double>());
+    data.source_covariance.push_back(
+        Regularize(source, depth, node, edge_source, options).covariance);
+    switch (options.weights) {
+      case WeightScheme::kInverseDensity:
+        data.source_prior.push_back(s.inverse_density[node]);
+        break;
+      case WeightScheme::kSourceCount:
+        data.source_prior.push_back(s.count[node]);
+        break;
+      case WeightScheme::kUniform:
+        data.source_prior.push_back(1.0);
+        break;
+    }
+  }
+  const Octree::Level& t = target.level(depth);
+  data.target_index.reserve(t.size());
+  for (size_t j = 0; j < t.size(); ++j) {
+    data.target_index.emplace(t.morton[j], static_cast<int32_t>(j));
+  }
+  data.target_regularized.resize(t.size());
+  data.target_ready.assign(t.size(), 0);
+  return data;
+}
+
+struct Correspondence {
+  int32_t k = 0;                                    // index into DepthData::source_*
+  int32_t j = 0;                                    // target node
+  Eigen::Vector3d moved = Eigen::Vector3d::Zero();  // T * mu_s
+  Eigen::Vector3d target_mean = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d information = Eigen::Matrix3d::Zero();  // (C_t + R C_s R^T)^-1
+  double weight = 0.0;                                    // normalised prior * robust weight
+  double robust = 0.0;                                    // robust weight alone
+};
+
+// The nearest target CoM to `q` among the target cells of the block around q's cell, within
+// max_distance; -1 when none.
+int32_t FindPartner(const Octree& target, const DepthData& data, const Eigen::Vector3d& q,
+                    double max_distance2, bool full_block) {
+  const int depth = data.depth;
+  const double cells = static_cast<double>(uint64_t{1} << depth);
+  const double scale = cells / (2.0 * target.half_length());
+  const Eigen::Vector3d f = (q - target.center()).array() * scale + 0.5 * cells;
+  // Farther than a cell outside the cube: nothing can be within reach.
+  for (int a = 0; a < 3; ++a) {
+    if (!(f[a] > -1.0 && f[a] < cells + 1.0)) return -1;
+  }
+  int64_t home[3];
+  int side[3];
+  for (int a = 0; a < 3; ++a) {
+    const double clamped = std::clamp(f[a], 0.0, cells - 1.0);
+    home[a] = static_cast<int64_t>(clamped);  // the build's quantization (CellOfPoint)
+    side[a] = (f[a] - static_cast<double>(home[a]) >= 0.5) ? 1 : -1;
+  }
+  const int64_t max_cell = static_cast<int64_t>(cells) - 1;
+  const Octree::Level& level = target.level(depth);
+  int32_t best = -1;
+  double best_d2 = max_distance2;
+  auto visit = [&](int64_t x, int64_t y, int64_t z) {
+    if (x < 0 || y < 0 || z < 0 || x > max_cell || y > max_cell || z > max_cell) return;
+    const uint64_t code = EncodeMorton<3>(
+        {static_cast<uint32_t>(x), static_cast<uint32_t>(y), static_cast<uint32_t>(z)});
+    const auto it = data.target_index.find(code);
+    if (it == data.target_index.end()) return;
+    const double d2 = (level.center_of_mass[it->second].cast<double>() - q).squaredNorm();
+    if (d2 <= best_d2) {
+      // Ties go to the lower index so the result never depends on hash order.
+      if (d2 < best_d2 || best < 0 || it->second < best) best = it->second;
+      best_d2 = d2;
+    }
+  };
+  if (full_block) {
+    for (int dz = -1; dz <= 1; ++dz) {
+      for (int dy = -1; dy <= 1; ++dy) {
+        for (int dx = -1; dx <= 1; ++dx) visit(home[0] + dx, home[1] + dy, home[2] + dz);
+      }
+    }
+  } else {
+    for (int b = 0; b < 8; ++b) {
+      visit(home[0] + ((b & 1) ? side[0] : 0), home[1] + ((b & 2) ? side[1] : 0),
+            home[2] + ((b & 4) ? side[2] : 0));
+    }
+  }
+  return best;
+}
+
+// One linearisation at (R, t): correspondences, H, b about the weighted centroid, and the
+// statistics the result reports.
+struct Linearization {
+  int correspondences = 0;
+  Matrix6d H = Matrix6d::Zero();
+  Vector6d b = Vector6d::Zero();
+  Eigen::Vector3d center = Eigen::Vector3d::Zero();
+  // Weighted second moment of the matched target CoMs about `center` (m^2).
+  Eigen::Matrix3d spread = Eigen::Matrix3d::Zero();
+  double inlier_count = 0.0;  // points (node counts)
+  double used_count = 0.0;
+  double inlier_sq_sum = 0.0;  // count-weighted squared plane distances
+  int inlier_nodes = 0;
+};
+
+Linearization Linearize(const Octree& source, const Octree& target, DepthData& data,
+                        const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
+                        const TreeRefinementOptions& options, std::vector<Correspondence>& corr) {
+  Linearization lin;
+  corr.clear();
+  const double max_d = options.max_correspondence_distance_cells * data.edge_target;
+  const double max_d2 = max_d * max_d;
+  const Octree::Level& t_level = target.level(data.depth);
+  const Octree::Level& s_level = source.level(data.depth);
+  double prior_sum = 0.0;
+  for (size_t k = 0; k < data.source_nodes.size(); ++k) {
+    lin.used_count += s_level.count[data.source_nodes[k]];
+    const Eigen::Vector3d q = R * data.source_mean[k] + t;
+    const int32_t j = FindPartner(target, data, q, max_d2, options.search_27_neighbors);
+    if (j < 0) continue;
+    Correspondence c;
+    c.k = static_cast<int32_t>(k);
+    c.j = j;
+    c.moved = q;
+    c.target_mean = t_level.center_of_mass[j].cast<double>();
+    c.weight = data.source_prior[k];
+    if (options.weights == WeightScheme::kInverseDensity) c.weight *= t_level.inverse_density[j];
+    prior_sum += c.weight;
+    corr.push_back(c);
+  }
+  lin.correspondences = static_cast<int>(corr.size());
+  if (corr.empty() || !(prior_sum > 0.0)) return lin;
+
+  // Prior weights rescaled to average 1, so H reads as "one measurement per correspondence".
+  const double prior_scale = static_cast<double>(corr.size()) / prior_sum;
+  const double c2 =
+      options.robust_scale_cells * options.robust_scale_cells / (2.0 * options.covariance_epsilon);
+  double weight_sum = 0.0;
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  for (Correspondence& c : corr) {
+    if (!data.target_ready[c.j]) {
+      data.target_regularized[c.j] = Regularize(target, data.depth, c.j, data.edge_target, options);
+      data.target_ready[c.j] = 1;
+    }
+    const RegularizedNode& tn = data.target_regularized[c.j];
+    const Eigen::Matrix3d combined =
+        tn.covariance + R * data.source_covariance[c.k] * R.transpose();
+    c.information = combined.inverse();
+    const Eigen::Vector3d r = c.target_mean - c.moved;
+    const double e2 = r.dot(c.information * r);
+    const double g = c2 / (c2 + e2);
+    c.robust = g * g;
+    c.weight *= prior_scale * c.robust;
+    weight_sum += c.weight;
+    centroid += c.weight * c.target_mean;
+    if (c.robust >= 0.25) {  // e2 <= c2: within robust_scale_cells of the partner's plane
+      const double count = s_level.count[data.source_nodes[c.k]];
+      const double dist = tn.planar ? std::abs(tn.normal.dot(r)) : r.norm();
+      lin.inlier_count += count;
+      lin.inlier_sq_sum += count * dist * dist;
+      ++lin.inlier_nodes;
+    }
+  }
+  if (!(weight_sum > 0.0)) return lin;
+  lin.center = centroid / weight_sum;
+  for (const Correspondence& c : corr) {
+    const Eigen::Vector3d a = c.moved - lin.center;
+    const Eigen::Vector3d arm = c.target_mean - lin.center;
+    lin.spread.noalias() += c.weight * arm * arm.transpose();
+    Eigen::Matrix<double, 3, 6> J;
+    J.leftCols<3>() = Skew(a);
+    J.rightCols<3>() = -Eigen::Matrix3d::Identity();
+    const Eigen::Matrix<double, 6, 3> JtW = c.weight * J.transpose() * c.information;
+    lin.H.noalias() += JtW * J;
+    lin.b.noalias() += JtW * (c.target_mean - c.moved);
+  }
+  lin.spread /= weight_sum;
+  return lin;
+}
+
+constexpr std::array<const char*, 6> kAxisNames = {"rotation about x",    "rotation about y",
+                                                   "rotation about z",    "translation along x",
+                                                   "translation along y", "translation along z"};
+
+void AnalyseDegeneracy(const Linearization& lin, const TreeRefinementOptions& options,
+                       TreeRefinementResult& result) {
+  result.information = lin.H;
+  result.information_center = lin.center;
+  // A rotation w about axis a moves the matched points by w times their RMS lever arm about a,
+  // sqrt(trace(spread) - spread_aa): dividing the rotation rows and columns by it turns every
+  // direction into a displacement in metres, so the six eigenvalues are comparable.
+  Vector6d s = Vector6d::Ones();
+  for (int a = 0; a < 3; ++a) {
+    s[a] = 1.0 / std::sqrt(std::max(lin.spread.trace() - lin.spread(a, a), 1e-24));
+  }
+  const Matrix6d scaled = s.asDiagonal() * lin.H * s.asDiagonal();
+  Eigen::SelfAdjointEigenSolver<Matrix6d> solver(scaled);
+  const Vector6d values = solver.eigenvalues();
+  const double largest = std::max(values.maxCoeff(), 1e-300);
+  result.normalized_eigenvalues = values / largest;
+  std::vector<int> degenerate;
+  for (int i = 0; i < 6; ++i) {
+    if (result.normalized_eigenvalues[i] < options.degeneracy_threshold) degenerate.push_back(i);
+  }
+  result.num_degenerate = static_cast<int>(degenerate.size());
+  result.degenerate_directions.resize(6, result.num_degenerate);
+  for (int c = 0; c < result.num_degenerate; ++c) {
+    result.degenerate_directions.col(c) = solver.eigenvectors().col(degenerate[c]);
+  }
+  for (int axis = 0; axis < 6; ++axis) {
+    double share = 0.0;
+    for (int c = 0; c < result.num_degenerate; ++c) {
+      share += result.degenerate_directions(axis, c) * result.degenerate_directions(axis, c);
+    }
+    result.degenerate_axes[axis] = share > 0.5;
+  }
+}
+
+absl::Status ValidateInputs(const Octree& source, const Octree& target,
+                            const Eigen::Isometry3d& initial, const TreeRefinementOptions& o) {
+  if (source.max_depth() < 0 || target.max_depth() < 0 || source.num_points() == 0 ||
+      target.num_points() == 0) {
+    return absl::InvalidArgumentError("RefineOnTrees: a tree is empty (no levels or no points)");
+  }
+  if (!initial.matrix().allFinite()) {
+    return absl::InvalidArgumentError("RefineOnTrees: the initial transform is not finite");
+  }
+  const Eigen::Matrix3d r = initial.linear();
+  if (!(r.transpose() * r).isApprox(Eigen::Matrix3d::Identity(), 1e-6) ||
+      std::abs(r.determinant() - 1.0) > 1e-6) {
+    return absl::InvalidArgumentError(
+        "RefineOnTrees: the initial transform's 3x3 block is not a rotation");
+  }
+  if (o.max_iterations_per_depth <= 0 || o.max_source_nodes_per_depth <= 0 ||
+      o.min_count_for_covariance < 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("RefineOnTrees: max_iterations_per_depth (", o.max_iterations_per_depth,
+                     ") and max_source_nodes_per_depth (", o.max_source_nodes_per_depth,
+                     ") must be positive, min_count_for_covariance non-negative"));
+  }
+  if (!(o.rotation_epsilon_rad > 0) || !(o.translation_epsilon_cells > 0) ||
+      !(o.max_correspondence_distance_cells > 0) || !(o.covariance_epsilon > 0) ||
+      !(o.covariance_epsilon <= 1) || !(o.robust_scale_cells > 0) || !(o.damping >= 0) ||
+      !(o.degeneracy_threshold >= 0) || !(o.min_fitness >= 0)) {
+    return absl::InvalidArgumentError(
+        "RefineOnTrees: epsilons, distances and scales must be positive (covariance_epsilon in "
+        "(0, 1]); damping, degeneracy_threshold and min_fitness non-negative");
+  }
+  return absl::OkStatus();
+}
+
+std::string DegeneracyReason(const TreeRefinementResult& result) {
+  std::vector<std::string> axes;
+  for (int a = 0; a < 6; ++a) {
+    if (result.degenerate_axes[a]) axes.push_back(kAxisNames[a]);
+  }
+  return absl::StrCat("degenerate geometry: ", result.num_degenerate,
+                      " unconstrained direction(s) (normalised information eigenvalue below the "
+                      "threshold)",
+                      axes.empty() ? std::string(", mixing several axes")
+                                   : absl::StrCat("; mostly ", absl::StrJoin(axes, ", ")));
+}
+
+}  // namespace
+
+absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const Octree& target,
+                                                   const Eigen::Isometry3d& initial_T_target_source,
+                                                   const TreeRefinementOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  if (absl::Status status = ValidateInputs(source, target, initial_T_target_source, options);
+      !status.ok()) {
+    return status;
+  }
+  const int deepest = std::min(source.max_depth(), target.max_depth());
+  const int finest = options.finest_depth < 0 ? deepest : options.finest_depth;
+  const int coarsest = options.coarsest_depth < 0 ? std::min(finest, std::max(3, finest - 4))
+                                                  : options.coarsest_depth;
+  if (finest > deepest || coarsest < 0 || coarsest > finest) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "RefineOnTrees: depths ", coarsest, "..", finest, " do not fit the trees (deepest shared ",
+        "depth ", deepest, "; need 0 <= coarsest <= finest)"));
+  }
+
+  TreeRefinementResult result;
+  result.T_target_source = initial_T_target_source;
+  Eigen::Matrix3d R = initial_T_target_source.linear();
+  Eigen::Vector3d t = initial_T_target_source.translation();
+  std::vector<Correspondence> corr;
+  bool all_converged = true;
+  Linearization final_lin;
+  for (int depth = coarsest; depth <= finest; ++depth) {
+    const auto stage_start = std::chrono::steady_clock::now();
+    DepthStage stage;
+    stage.depth = depth;
+    DepthData data = PrepareDepth(source, target, depth, options);
+    stage.cell_edge = data.edge_target;
+    stage.source_nodes = static_cast<int>(data.source_nodes.size());
+    const double translation_epsilon = options.translation_epsilon_cells * data.edge_target;
+    Linearization lin;
+    for (int iteration = 0; iteration <= options.max_iterations_per_depth; ++iteration) {
+      lin = Linearize(source, target, data, R, t, options, corr);
+      stage.correspondences = lin.correspondences;
+      // The last pass only measures (its linearisation at the final transform feeds the result).
+      if (iteration == options.max_iterations_per_depth || stage.converged) break;
+      if (lin.correspondences < options.min_correspondences) break;
+      Matrix6d H = lin.H;
+      const double mean_diag = H.diagonal().mean();
+      H.diagonal().array() += options.damping * mean_diag;
+      const Vector6d delta = H.ldlt().solve(-lin.b);
+      if (!delta.allFinite() || !(mean_diag > 0)) {
+        result.T_target_source = MakeIsometry(R, t);
+        result.failure_reason =
+            absl::StrCat("singular normal equations at depth ", depth, " (no constraint at all)");
+        result.stages.push_back(stage);
+        result.total_seconds = SecondsSince(start);
+        return result;
+      }
+      const Eigen::Vector3d w = delta.head<3>();
+      const Eigen::Vector3d v = delta.tail<3>();
+      const double angle = w.norm();
+      const Eigen::Matrix3d dR = angle > 0 ? Eigen::AngleAxisd(angle, w / angle).toRotationMatrix()
+                                           : Eigen::Matrix3d::Identity();
+      R = dR * R;
+      t = lin.center + dR * (t - lin.center) + v;
+      // Re-orthonormalise so that many small updates never drift off SO(3).
+      R = Eigen::Quaterniond(R).normalized().toRotationMatrix();
+      ++stage.iterations;
+      ++result.iterations;
+      if (angle < options.rotation_epsilon_rad && v.norm() < translation_epsilon) {
+        stage.converged = true;
+      }
+    }
+    stage.seconds = SecondsSince(stage_start);
+    result.stages.push_back(stage);
+    all_converged = all_converged && stage.converged;
+    if (lin.correspondences < options.min_correspondences) {
+      result.T_target_source = MakeIsometry(R, t);
+      result.failure_reason = absl::StrCat(
+          "no overlap: ", lin.correspondences, " correspondence(s) at depth ", depth, " (need ",
+          options.min_correspondences, "); the clouds do not overlap under the current transform");
+      result.total_seconds = SecondsSince(start);
+      return result;
+    }
+    final_lin = lin;
+  }
+
+  result.T_target_source = MakeIsometry(R, t);
+  result.converged = all_converged;
+  result.inliers = final_lin.inlier_nodes;
+  result.fitness = final_lin.used_count > 0 ? final_lin.inlier_count / final_lin.used_count : 0.0;
+  result.inlier_rmse = final_lin.inlier_count > 0
+                           ? std::sqrt(final_lin.inlier_sq_sum / final_lin.inlier_count)
+                           : 0.0;
+  AnalyseDegeneracy(final_lin, options, result);
+  if (result.fitness < options.min_fitness) {
+    result.failure_reason =
+        absl::StrCat("fitness ", result.fitness, " below min_fitness ", options.min_fitness,
+                     ": too little of the source overlaps");
+  } else if (result.num_degenerate > 0) {
+    result.failure_reason = DegeneracyReason(result);
+  } else {
+    result.valid = true;
+  }
+  result.total_seconds = SecondsSince(start);
+  return result;
+}
+
+}  // namespace rpsr::core

@@ -1,0 +1,160 @@
+// Fine registration on two Barnes-Hut trees (issue 5): the multi-scale cost of the paper's Eq. 2,
+//     U(R, t) = sum_d sum_{l, l^} rho^y_{d,l} rho^x_{d,l^} || (R mu^y_{d,l} + t) - mu^x_{d,l^}
+//     ||^2,
+// minimised coarse to fine over depths with generalized (plane-to-plane, GICP) residuals built
+// from the nodes' covariances and a robust kernel. It reads only what a cached tree holds (count,
+// centre of mass, covariance, inverse density, Morton codes): NO raw points, so the service can
+// refine from its tree cache.
+//
+// Why these choices:
+//  - Coarse to fine, one depth at a time (a continuation of Eq. 2's sum over depths): coarse cells
+//    average away noise and give a wide basin; each finer depth starts where the coarser one
+//    stopped, so by the finest depth the remaining error is below a cell and correspondences are
+//    right. Summing all depths at once would let the many fine nodes dominate before they are
+//    reliable.
+//  - One correspondence per source node, the nearest target CoM among the target cells of the same
+//    depth around the moved CoM (the paper's multiply-linked sum over (l, l^) restricted to the
+//    pairs that matter: the far pairs carry vanishing robust weight anyway).
+//  - Generalized residuals: r = mu_t - T mu_s with information (C_t + R C_s R^T)^-1, each
+//    covariance regularised as in GICP (eigenvalues set to (1, 1, eps) so a planar node constrains
+//    only its normal) and scaled by the squared cell edge so the Mahalanobis distance is unitless
+//    and comparable across depths. Nodes with fewer than 3 points have no meaningful covariance
+//    and get an isotropic one.
+//  - Robust kernel (Geman-McClure) on that Mahalanobis distance: a node whose partner is a
+//    different surface (occlusion, dynamic objects, partial overlap) fades out smoothly.
+//  - Weights: see WeightScheme.
+//
+// Conventions: T_target_source maps source points into the target frame
+// (core/data/transform_convention.h); metres (the clouds' units), radians, seconds.
+#ifndef RPSR_CORE_REFINE_TREE_REFINEMENT_H_
+#define RPSR_CORE_REFINE_TREE_REFINEMENT_H_
+
+#include <array>
+#include <string>
+#include <vector>
+
+#include "Eigen/Core"
+#include "Eigen/Geometry"
+#include "absl/status/statusor.h"
+#include "core/tree/bh_tree.h"
+
+namespace rpsr::core {
+
+// How a correspondence (source node l, target node l^) is weighted, before the robust kernel.
+enum class WeightScheme {
+  // Eq. 2: rho^y_l * rho^x_l^ (each inverse density sums to 1 per depth; sparse nodes weigh more),
+  // rescaled so the weights of a depth average 1. This is the paper's importance weighting: every
+  // occupied region of the surface counts about equally, whatever the sampling density (a LiDAR's
+  // near ground would otherwise outweigh everything).
+  kInverseDensity,
+  // count_l of the source node: reproduces point-level GICP on the raw points (every point votes
+  // once), dominated by densely sampled regions.
+  kSourceCount,
+  // Every correspondence 1: every occupied cell votes once, i.e. the inverse-density weighting
+  // without the target factor.
+  kUniform,
+};
+
+struct TreeRefinementOptions {
+  // Depths visited, coarse to fine. finest_depth < 0: the deepest depth both trees hold.
+  // coarsest_depth < 0: max(3, finest - 4), i.e. five stages whose cells shrink 16 times, enough
+  // to pull in an initial error of about a coarse cell (7.5 m on a 240 m LiDAR cube, 0.125 on an
+  // object in [-1, 1]) while the depth-3 floor keeps at least a few dozen nodes per stage.
+  int coarsest_depth = -1;
+  int finest_depth = -1;
+  // Gauss-Newton iterations per depth at most (each re-finds the correspondences).
+  int max_iterations_per_depth = 12;
+  // A depth stops when one update rotates less than this (radians) AND translates less than
+  // translation_epsilon_cells * the depth's cell edge (so the threshold scales with the data:
+  // ~3e-5 on a depth-6 object, ~5e-4 m on a depth-9 LiDAR cube).
+  double rotation_epsilon_rad = 1e-4;
+  double translation_epsilon_cells = 1e-3;
+  // Correspondence search: the target cells around the moved CoM (the 2x2x2 block nearest to it,
+  // which holds every target cell within half a cell; or the full 3x3x3 block), the nearest
+  // target CoM no farther than max_correspondence_distance_cells cell edges. 8 cells is ~3x
+  // cheaper than 27 and, after the coarser depth converged, misses nothing that matters.
+  bool search_27_neighbors = false;
+  double max_correspondence_distance_cells = 1.0;
+  // GICP covariance regularisation: eigenvalues become (1, 1, covariance_epsilon) * edge^2.
+  double covariance_epsilon = 1e-3;
+  // Nodes with fewer points (a point or two has no shape) borrow the shape of their nearest
+  // ancestor with enough points; isotropic edge^2 * I only if none has.
+  int min_count_for_covariance = 3;
+  // Geman-McClure kernel on the Mahalanobis distance, w = (c^2 / (c^2 + e^2))^2 with
+  // c^2 = robust_scale_cells^2 / (2 covariance_epsilon): a plane-to-plane offset of
+  // robust_scale_cells cell edges along the normal gets weight 1/4 at any depth.
+  double robust_scale_cells = 0.25;
+  WeightScheme weights = WeightScheme::kInverseDensity;
+  // Source nodes used per depth at most (an even stride over the Morton order keeps the spatial
+  // spread): bounds the cost on 120k-point scans, whose fine depths hold ~50k nodes.
+  int max_source_nodes_per_depth = 6000;
+  // Levenberg-Marquardt damping added to the diagonal of H (relative to its mean diagonal).
+  double damping = 1e-6;
+  // Validity. A depth with fewer correspondences than this ends the refinement as invalid ("no
+  // overlap"); a final fitness below min_fitness is invalid too.
+  int min_correspondences = 12;
+  double min_fitness = 0.05;
+  // Degeneracy: the information matrix, expressed about the matched points' centroid with its
+  // rotation about each axis scaled by the points' RMS lever arm about that axis (so all six
+  // directions are displacements in metres), has eigenvalues normalised by the largest; those below
+  // this are degenerate. Planar residuals leave tangential directions an information ratio
+  // ~covariance_epsilon, so the threshold must sit well above it.
+  double degeneracy_threshold = 0.02;
+};
+
+// Per depth: what the stage did.
+struct DepthStage {
+  int depth = 0;
+  double cell_edge = 0.0;   // metres (target tree)
+  int source_nodes = 0;     // used at this depth
+  int correspondences = 0;  // at the last iteration
+  int iterations = 0;
+  bool converged = false;
+  double seconds = 0.0;
+};
+
+struct TreeRefinementResult {
+  // The refined transform (source -> target); the initial one when invalid before any update.
+  Eigen::Isometry3d T_target_source = Eigen::Isometry3d::Identity();
+  // false: do not trust T. failure_reason says why (no overlap, too little fitness, degenerate
+  // geometry naming the axes, a singular system). Empty when valid.
+  bool valid = false;
+  std::string failure_reason;
+  // Every depth stopped by the epsilon test (not by max_iterations_per_depth).
+  bool converged = false;
+  int iterations = 0;  // Gauss-Newton iterations over all depths
+  // Finest depth: fraction of the source's points (by node count) whose node has an inlier
+  // correspondence (robust weight >= 1/4), and the RMS of their distances to the partner's plane
+  // (the target node's normal; the CoM distance for isotropic nodes), metres.
+  double fitness = 0.0;
+  double inlier_rmse = 0.0;
+  int inliers = 0;  // nodes
+  // 6x6 Gauss-Newton information (J^T W J) at the final transform, finest depth, ordered
+  // (rotation x, y, z [1/rad^2], translation x, y, z [1/m^2]) for a perturbation applied in the
+  // TARGET frame about `information_center`: T <- [exp(w) | c - exp(w) c + v] T. Weights are
+  // normalised to average 1 per correspondence and the residual covariance is the regularised one.
+  Eigen::Matrix<double, 6, 6> information = Eigen::Matrix<double, 6, 6>::Zero();
+  Eigen::Vector3d information_center = Eigen::Vector3d::Zero();
+  // Eigen-analysis of the scaled information (see TreeRefinementOptions::degeneracy_threshold):
+  // normalised eigenvalues ascending, the directions (columns, rotation part scaled to metres) of
+  // those below the threshold, and per axis whether it lies mostly (> 1/2 of its squared norm) in
+  // that degenerate subspace. Axes ordered as `information`.
+  Eigen::Matrix<double, 6, 1> normalized_eigenvalues = Eigen::Matrix<double, 6, 1>::Zero();
+  Eigen::MatrixXd degenerate_directions;
+  std::array<bool, 6> degenerate_axes = {};
+  int num_degenerate = 0;
+  std::vector<DepthStage> stages;  // coarse to fine
+  double total_seconds = 0.0;
+};
+
+// Refines `initial_T_target_source`. Errors (InvalidArgument): a non-finite or non-rigid initial
+// transform, empty trees, depths outside the trees or coarsest > finest, non-positive iteration
+// counts, thresholds or scales. Geometric failures (no overlap, degeneracy) are NOT errors: they
+// come back as a result with valid = false and the reason. Deterministic, one thread.
+absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const Octree& target,
+                                                   const Eigen::Isometry3d& initial_T_target_source,
+                                                   const TreeRefinementOptions& options = {});
+
+}  // namespace rpsr::core
+
+#endif  // RPSR_CORE_REFINE_TREE_REFINEMENT_H_

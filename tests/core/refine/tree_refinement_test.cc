@@ -1,0 +1,247 @@
+// RefineOnTrees (issue 5): convergence on objects and simulated LiDAR pairs, honest reports on
+// degenerate geometry and on clouds that do not overlap, determinism, and that only trees are
+// needed.
+#include "core/refine/tree_refinement.h"
+
+#include <cmath>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "core/data/object_pairs.h"
+#include "core/data/registration_metrics.h"
+#include "core/data/transform_convention.h"
+#include "core/synth/lidar_sequence.h"
+#include "core/synth/shape_families.h"
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+
+namespace rpsr::core {
+namespace {
+
+using ::testing::HasSubstr;
+
+constexpr double kDeg = M_PI / 180.0;
+
+Octree TreeOf(const PointCloud& cloud, int max_depth) {
+  BarnesHutTreeOptions options;
+  options.max_depth = max_depth;
+  options.neighbor_max_depth = 2;  // refinement reads no neighbour tables
+  auto tree = BuildOctree(cloud, options);
+  EXPECT_TRUE(tree.ok()) << tree.status();
+  return *std::move(tree);
+}
+
+// Truth composed with a rotation of `angle_rad` about a random axis and a translation of length
+// `shift` in a random direction (applied in the target frame).
+Eigen::Isometry3d Perturbed(const Eigen::Isometry3d& truth, double angle_rad, double shift,
+                            std::mt19937_64& rng) {
+  std::normal_distribution<double> normal;
+  const Eigen::Vector3d axis = Eigen::Vector3d(normal(rng), normal(rng), normal(rng)).normalized();
+  const Eigen::Vector3d dir = Eigen::Vector3d(normal(rng), normal(rng), normal(rng)).normalized();
+  return MakeTransform(Eigen::AngleAxisd(angle_rad, axis).toRotationMatrix(), shift * dir) * truth;
+}
+
+TEST(TreeRefinementTest, ObjectsConvergeFromNetworkSizedErrors) {
+  PairOptions pair_options;
+  pair_options.num_points = 2048;
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> angle(5.0, 15.0);
+  std::uniform_real_distribution<double> shift(0.05, 0.1);
+  int tested = 0;
+  for (uint64_t seed = 1; tested < 12; ++seed) {
+    auto pair = MakeObjectPair(pair_options, seed);
+    ASSERT_TRUE(pair.ok()) << pair.status();
+    if (ShapeFamilies()[pair->family_index].symmetry != RotationalSymmetry::kNone) continue;
+    ++tested;
+    const Octree source = TreeOf(pair->source, 6);
+    const Octree target = TreeOf(pair->target, 6);
+    const Eigen::Isometry3d initial =
+        Perturbed(pair->T_target_source, angle(rng) * kDeg, shift(rng), rng);
+    auto result = RefineOnTrees(source, target, initial);
+    ASSERT_TRUE(result.ok()) << result.status();
+    const PairError error = ErrorOf(result->T_target_source, pair->T_target_source);
+    const std::string family = ShapeFamilies()[pair->family_index].name;
+    EXPECT_LT(error.rotation_deg, 0.5) << family << " seed " << seed;
+    EXPECT_LT(error.translation, 0.005) << family << " seed " << seed;
+    EXPECT_TRUE(result->valid) << family << ": " << result->failure_reason;
+    EXPECT_GT(result->fitness, 0.3) << family;
+    EXPECT_LT(result->inlier_rmse, 0.02) << family;
+    EXPECT_GT(result->iterations, 0);
+    EXPECT_EQ(result->stages.size(), 4u);  // depths 3..6
+  }
+}
+
+TEST(TreeRefinementTest, SimulatedLidarPairFiveFramesApartFromIdentity) {
+  LidarSequenceOptions options;
+  options.frame_count = 8;
+  options.seed = 3;
+  auto sequence = LidarSequenceSimulator::Create(options);
+  ASSERT_TRUE(sequence.ok()) << sequence.status();
+  const PointCloud target_cloud = sequence->SimulateFrame(0).cloud;
+  const PointCloud source_cloud = sequence->SimulateFrame(5).cloud;
+  const Eigen::Isometry3d truth =
+      sequence->T_world_lidar()[0].inverse() * sequence->T_world_lidar()[5];
+  ASSERT_GT(truth.translation().norm(), 2.0);  // a real motion, not a near-identity
+  const Octree source = TreeOf(source_cloud, 9);
+  const Octree target = TreeOf(target_cloud, 9);
+  auto result = RefineOnTrees(source, target, Eigen::Isometry3d::Identity());
+  ASSERT_TRUE(result.ok()) << result.status();
+  const PairError error = ErrorOf(result->T_target_source, truth);
+  EXPECT_LT(error.rotation_deg, 0.2);
+  EXPECT_LT(error.translation, 0.1);
+  EXPECT_TRUE(result->valid) << result->failure_reason;
+  EXPECT_GT(result->fitness, 0.3);
+}
+
+// Points on z = 0 (a square), on two walls and a floor of a corridor along x, on a sphere.
+PointCloud Plane(int n, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  PointCloud cloud;
+  for (int i = 0; i < n; ++i) cloud.points.emplace_back(u(rng), u(rng), 0.0f);
+  return cloud;
+}
+
+PointCloud Corridor(int n, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<float> along(-10.0f, 10.0f);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  PointCloud cloud;
+  for (int i = 0; i < n; ++i) {
+    const float x = along(rng);
+    switch (i % 3) {
+      case 0:
+        cloud.points.emplace_back(x, -1.5f + 3.0f * u(rng), 0.0f);
+        break;
+      case 1:
+        cloud.points.emplace_back(x, -1.5f, 2.5f * u(rng));
+        break;
+      default:
+        cloud.points.emplace_back(x, 1.5f, 2.5f * u(rng));
+        break;
+    }
+  }
+  return cloud;
+}
+
+PointCloud Sphere(int n, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<float> normal;
+  PointCloud cloud;
+  const Eigen::Vector3f center(0.3f, -0.2f, 0.1f);
+  for (int i = 0; i < n; ++i) {
+    cloud.points.push_back(center +
+                           Eigen::Vector3f(normal(rng), normal(rng), normal(rng)).normalized());
+  }
+  return cloud;
+}
+
+struct DegenerateCase {
+  std::string name;
+  PointCloud (*make)(int, uint64_t);
+  std::array<bool, 6> axes;  // (rx, ry, rz, tx, ty, tz)
+};
+
+class DegenerateGeometryTest : public ::testing::TestWithParam<DegenerateCase> {};
+
+TEST_P(DegenerateGeometryTest, ReportedInvalidWithTheUnconstrainedAxes) {
+  const DegenerateCase& c = GetParam();
+  const Octree source = TreeOf(c.make(8000, 1), 6);
+  const Octree target = TreeOf(c.make(8000, 2), 6);
+  const Eigen::Isometry3d initial =
+      MakeTransform(RotationFromEulerXyz({0.01, -0.01, 0.01}), Eigen::Vector3d(0.01, 0.01, -0.01));
+  auto result = RefineOnTrees(source, target, initial);
+  ASSERT_TRUE(result.ok()) << result.status();
+  EXPECT_FALSE(result->valid);
+  EXPECT_THAT(result->failure_reason, HasSubstr("degenerate"));
+  int expected = 0;
+  for (bool a : c.axes) expected += a;
+  EXPECT_EQ(result->num_degenerate, expected) << result->normalized_eigenvalues.transpose();
+  EXPECT_EQ(result->degenerate_axes, c.axes) << result->failure_reason;
+  EXPECT_EQ(result->degenerate_directions.cols(), expected);
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Shapes, DegenerateGeometryTest,
+    ::testing::Values(DegenerateCase{"plane", Plane, {false, false, true, true, true, false}},
+                      DegenerateCase{
+                          "corridor", Corridor, {false, false, false, true, false, false}},
+                      DegenerateCase{"sphere", Sphere, {true, true, true, false, false, false}}),
+    [](const auto& info) { return info.param.name; });
+
+TEST(TreeRefinementTest, WellConstrainedObjectIsNotDegenerate) {
+  PairOptions pair_options;
+  pair_options.num_points = 2048;
+  auto pair = MakeObjectPair(pair_options, 1);
+  ASSERT_TRUE(pair.ok());
+  auto result =
+      RefineOnTrees(TreeOf(pair->source, 6), TreeOf(pair->target, 6), pair->T_target_source);
+  ASSERT_TRUE(result.ok());
+  EXPECT_EQ(result->num_degenerate, 0) << result->normalized_eigenvalues.transpose();
+  // The information matrix is symmetric positive definite.
+  EXPECT_TRUE(result->information.isApprox(result->information.transpose()));
+  EXPECT_GT(result->information.ldlt().vectorD().minCoeff(), 0.0);
+}
+
+TEST(TreeRefinementTest, NoOverlapIsInvalidNotAnError) {
+  const Octree source = TreeOf(Sphere(2000, 1), 6);
+  const Octree target = TreeOf(Sphere(2000, 2), 6);
+  const Eigen::Isometry3d far =
+      MakeTransform(Eigen::Matrix3d::Identity(), Eigen::Vector3d(100.0, 0.0, 0.0));
+  auto result = RefineOnTrees(source, target, far);
+  ASSERT_TRUE(result.ok()) << result.status();
+  EXPECT_FALSE(result->valid);
+  EXPECT_THAT(result->failure_reason, HasSubstr("no overlap"));
+  EXPECT_EQ(result->fitness, 0.0);
+  EXPECT_TRUE(result->T_target_source.isApprox(far));
+}
+
+TEST(TreeRefinementTest, DeterministicAndNeedsOnlyTrees) {
+  PairOptions pair_options;
+  pair_options.num_points = 2048;
+  Octree source, target;
+  Eigen::Isometry3d truth;
+  {
+    // The clouds go out of scope: refinement sees the trees alone.
+    auto pair = MakeObjectPair(pair_options, 5);
+    ASSERT_TRUE(pair.ok());
+    source = TreeOf(pair->source, 6);
+    target = TreeOf(pair->target, 6);
+    truth = pair->T_target_source;
+  }
+  std::mt19937_64 rng(1);
+  const Eigen::Isometry3d initial = Perturbed(truth, 10 * kDeg, 0.05, rng);
+  auto a = RefineOnTrees(source, target, initial);
+  auto b = RefineOnTrees(source, target, initial);
+  ASSERT_TRUE(a.ok() && b.ok());
+  EXPECT_EQ(a->T_target_source.matrix(), b->T_target_source.matrix());
+  EXPECT_EQ(a->iterations, b->iterations);
+  EXPECT_EQ(a->fitness, b->fitness);
+  EXPECT_EQ(a->information, b->information);
+}
+
+TEST(TreeRefinementTest, RejectsBadInputs) {
+  const Octree tree = TreeOf(Sphere(500, 1), 5);
+  EXPECT_EQ(RefineOnTrees(Octree(), tree, Eigen::Isometry3d::Identity()).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  Eigen::Isometry3d scaled = Eigen::Isometry3d::Identity();
+  scaled.linear() *= 2.0;
+  EXPECT_EQ(RefineOnTrees(tree, tree, scaled).status().code(), absl::StatusCode::kInvalidArgument);
+  TreeRefinementOptions options;
+  options.finest_depth = 6;  // deeper than the trees
+  EXPECT_EQ(RefineOnTrees(tree, tree, Eigen::Isometry3d::Identity(), options).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  options = {};
+  options.coarsest_depth = 5;
+  options.finest_depth = 4;
+  EXPECT_EQ(RefineOnTrees(tree, tree, Eigen::Isometry3d::Identity(), options).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  options = {};
+  options.max_iterations_per_depth = 0;
+  EXPECT_EQ(RefineOnTrees(tree, tree, Eigen::Isometry3d::Identity(), options).status().code(),
+            absl::StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace rpsr::core
