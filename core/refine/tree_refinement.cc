@@ -91,6 +91,12 @@ struct DepthData {
   // Lazily regularised target nodes (only those ever matched pay the eigen-decomposition).
   std::vector<RegularizedNode> target_regularized;
   std::vector<uint8_t> target_ready;
+  // Per source entry: the target nodes of the cell block last searched (block_size slots, -1 =
+  // empty cell), keyed by the block's home cell code and, for 8-cell blocks, its side bits.
+  int block_size = 8;
+  std::vector<uint64_t> block_home;
+  std::vector<uint8_t> block_sides;
+  std::vector<int32_t> block_nodes;
 };
 
 double EdgeOf(const Octree& tree, int depth) {
@@ -135,6 +141,10 @@ DepthData PrepareDepth(const Octree& source, const Octree& target, int depth,
   for (size_t j = 0; j < t.size(); ++j) {
     data.target_index.emplace(t.morton[j], static_cast<int32_t>(j));
   }
+  data.block_size = options.search_27_neighbors ? 27 : 8;
+  data.block_home.assign(used, ~uint64_t{0});  // no code: depth <= 21 uses 63 bits
+  data.block_sides.assign(used, 0);
+  data.block_nodes.assign(used * data.block_size, -1);
   data.target_regularized.resize(t.size());
   data.target_ready.assign(t.size(), 0);
   return data;
@@ -150,10 +160,13 @@ struct Correspondence {
   double robust = 0.0;                                    // robust weight alone
 };
 
-// The nearest target CoM to `q` among the target cells of the block around q's cell, within
-// max_distance; -1 when none.
-int32_t FindPartner(const Octree& target, const DepthData& data, const Eigen::Vector3d& q,
-                    double max_distance2, bool full_block) {
+// The nearest target CoM to `q` (the moved CoM of source entry k) among the target cells of the
+// block around q's cell, within max_distance; -1 when none. The block's node indices are cached
+// per source entry and looked up again only when q moves to another block: after the first
+// iterations of a depth the updates are small, so the hash lookups (random memory accesses, most
+// of the cost) are mostly skipped. The answer is the same as without the cache.
+int32_t FindPartner(const Octree& target, DepthData& data, size_t k, const Eigen::Vector3d& q,
+                    double max_distance2) {
   const int depth = data.depth;
   const double cells = static_cast<double>(uint64_t{1} << depth);
   const double scale = cells / (2.0 * target.half_length());
@@ -162,40 +175,57 @@ int32_t FindPartner(const Octree& target, const DepthData& data, const Eigen::Ve
   for (int a = 0; a < 3; ++a) {
     if (!(f[a] > -1.0 && f[a] < cells + 1.0)) return -1;
   }
-  int64_t home[3];
+  uint32_t home[3];
   int side[3];
+  uint8_t side_bits = 0;
   for (int a = 0; a < 3; ++a) {
     const double clamped = std::clamp(f[a], 0.0, cells - 1.0);
-    home[a] = static_cast<int64_t>(clamped);  // the build's quantization (CellOfPoint)
+    home[a] = static_cast<uint32_t>(clamped);  // the build's quantization (CellOfPoint)
     side[a] = (f[a] - static_cast<double>(home[a]) >= 0.5) ? 1 : -1;
+    if (side[a] > 0) side_bits |= static_cast<uint8_t>(1 << a);
   }
-  const int64_t max_cell = static_cast<int64_t>(cells) - 1;
+  const uint64_t home_code = EncodeMorton<3>({home[0], home[1], home[2]});
+  const int block = data.block_size;
+  int32_t* candidates = &data.block_nodes[k * block];
+  if (data.block_home[k] != home_code || (block == 8 && data.block_sides[k] != side_bits)) {
+    data.block_home[k] = home_code;
+    data.block_sides[k] = side_bits;
+    const int64_t max_cell = static_cast<int64_t>(cells) - 1;
+    auto lookup = [&](int64_t x, int64_t y, int64_t z) -> int32_t {
+      if (x < 0 || y < 0 || z < 0 || x > max_cell || y > max_cell || z > max_cell) return -1;
+      const auto it = data.target_index.find(EncodeMorton<3>(
+          {static_cast<uint32_t>(x), static_cast<uint32_t>(y), static_cast<uint32_t>(z)}));
+      return it == data.target_index.end() ? -1 : it->second;
+    };
+    int slot = 0;
+    if (block == 27) {
+      for (int dz = -1; dz <= 1; ++dz) {
+        for (int dy = -1; dy <= 1; ++dy) {
+          for (int dx = -1; dx <= 1; ++dx) {
+            candidates[slot++] =
+                lookup(int64_t{home[0]} + dx, int64_t{home[1]} + dy, int64_t{home[2]} + dz);
+          }
+        }
+      }
+    } else {
+      for (int b = 0; b < 8; ++b) {
+        candidates[slot++] = lookup(int64_t{home[0]} + ((b & 1) ? side[0] : 0),
+                                    int64_t{home[1]} + ((b & 2) ? side[1] : 0),
+                                    int64_t{home[2]} + ((b & 4) ? side[2] : 0));
+      }
+    }
+  }
   const Octree::Level& level = target.level(depth);
   int32_t best = -1;
   double best_d2 = max_distance2;
-  auto visit = [&](int64_t x, int64_t y, int64_t z) {
-    if (x < 0 || y < 0 || z < 0 || x > max_cell || y > max_cell || z > max_cell) return;
-    const uint64_t code = EncodeMorton<3>(
-        {static_cast<uint32_t>(x), static_cast<uint32_t>(y), static_cast<uint32_t>(z)});
-    const auto it = data.target_index.find(code);
-    if (it == data.target_index.end()) return;
-    const double d2 = (level.center_of_mass[it->second].cast<double>() - q).squaredNorm();
-    if (d2 <= best_d2) {
-      // Ties go to the lower index so the result never depends on hash order.
-      if (d2 < best_d2 || best < 0 || it->second < best) best = it->second;
+  for (int slot = 0; slot < block; ++slot) {
+    const int32_t j = candidates[slot];
+    if (j < 0) continue;
+    const double d2 = (level.center_of_mass[j].cast<double>() - q).squaredNorm();
+    // Ties go to the lower index: the answer never depends on the visiting order.
+    if (d2 < best_d2 || (d2 == best_d2 && (best < 0 || j < best))) {
+      best = j;
       best_d2 = d2;
-    }
-  };
-  if (full_block) {
-    for (int dz = -1; dz <= 1; ++dz) {
-      for (int dy = -1; dy <= 1; ++dy) {
-        for (int dx = -1; dx <= 1; ++dx) visit(home[0] + dx, home[1] + dy, home[2] + dz);
-      }
-    }
-  } else {
-    for (int b = 0; b < 8; ++b) {
-      visit(home[0] + ((b & 1) ? side[0] : 0), home[1] + ((b & 2) ? side[1] : 0),
-            home[2] + ((b & 4) ? side[2] : 0));
     }
   }
   return best;
@@ -229,7 +259,7 @@ Linearization Linearize(const Octree& source, const Octree& target, DepthData& d
   for (size_t k = 0; k < data.source_nodes.size(); ++k) {
     lin.used_count += s_level.count[data.source_nodes[k]];
     const Eigen::Vector3d q = R * data.source_mean[k] + t;
-    const int32_t j = FindPartner(target, data, q, max_d2, options.search_27_neighbors);
+    const int32_t j = FindPartner(target, data, k, q, max_d2);
     if (j < 0) continue;
     Correspondence c;
     c.k = static_cast<int32_t>(k);
@@ -354,7 +384,7 @@ absl::Status ValidateInputs(const Octree& source, const Octree& target,
   if (!(o.rotation_epsilon_rad > 0) || !(o.translation_epsilon_cells > 0) ||
       !(o.max_correspondence_distance_cells > 0) || !(o.covariance_epsilon > 0) ||
       !(o.covariance_epsilon <= 1) || !(o.robust_scale_cells > 0) || !(o.damping >= 0) ||
-      !(o.degeneracy_threshold >= 0) || !(o.min_fitness >= 0)) {
+      !(o.coarse_epsilon_factor >= 1) || !(o.degeneracy_threshold >= 0) || !(o.min_fitness >= 0)) {
     return absl::InvalidArgumentError(
         "RefineOnTrees: epsilons, distances and scales must be positive (covariance_epsilon in "
         "(0, 1]); damping, degeneracy_threshold and min_fitness non-negative");
@@ -408,12 +438,20 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
     DepthData data = PrepareDepth(source, target, depth, options);
     stage.cell_edge = data.edge_target;
     stage.source_nodes = static_cast<int>(data.source_nodes.size());
-    const double translation_epsilon = options.translation_epsilon_cells * data.edge_target;
+    stage.prepare_seconds = SecondsSince(stage_start);
+    // A coarser depth only has to hand the next one an error well inside a cell: looser test.
+    const bool is_finest = depth == finest;
+    const double loosen = is_finest ? 1.0 : options.coarse_epsilon_factor;
+    const double rotation_epsilon = loosen * options.rotation_epsilon_rad;
+    const double translation_epsilon =
+        loosen * options.translation_epsilon_cells * data.edge_target;
     Linearization lin;
     for (int iteration = 0; iteration <= options.max_iterations_per_depth; ++iteration) {
+      // At the finest depth the pass after the last update only measures: its linearisation at
+      // the final transform feeds the information matrix, fitness and RMSE.
+      if (stage.converged && !is_finest) break;
       lin = Linearize(source, target, data, R, t, options, corr);
       stage.correspondences = lin.correspondences;
-      // The last pass only measures (its linearisation at the final transform feeds the result).
       if (iteration == options.max_iterations_per_depth || stage.converged) break;
       if (lin.correspondences < options.min_correspondences) break;
       Matrix6d H = lin.H;
@@ -439,7 +477,7 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
       R = Eigen::Quaterniond(R).normalized().toRotationMatrix();
       ++stage.iterations;
       ++result.iterations;
-      if (angle < options.rotation_epsilon_rad && v.norm() < translation_epsilon) {
+      if (angle < rotation_epsilon && v.norm() < translation_epsilon) {
         stage.converged = true;
       }
     }

@@ -69,6 +69,9 @@ struct TreeRefinementOptions {
   // ~3e-5 on a depth-6 object, ~5e-4 m on a depth-9 LiDAR cube).
   double rotation_epsilon_rad = 1e-4;
   double translation_epsilon_cells = 1e-3;
+  // Depths above the finest stop at epsilons this many times looser (they only need to leave the
+  // next depth an error well inside its cells; tight convergence there is wasted time).
+  double coarse_epsilon_factor = 10.0;
   // Correspondence search: the target cells around the moved CoM (the 2x2x2 block nearest to it,
   // which holds every target cell within half a cell; or the full 3x3x3 block), the nearest
   // target CoM no farther than max_correspondence_distance_cells cell edges. 8 cells is ~3x
@@ -110,7 +113,8 @@ struct DepthStage {
   int correspondences = 0;  // at the last iteration
   int iterations = 0;
   bool converged = false;
-  double seconds = 0.0;
+  double seconds = 0.0;          // the whole stage, preparation included
+  double prepare_seconds = 0.0;  // regularising source nodes, indexing the target level
 };
 
 struct TreeRefinementResult {

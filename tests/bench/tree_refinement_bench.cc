@@ -15,6 +15,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "benchmark/benchmark.h"
@@ -74,6 +75,11 @@ void ReportResult(benchmark::State& state, const TreeRefinementResult& result,
   state.counters["fitness"] = result.fitness;
   state.counters["inlier_rmse"] = result.inlier_rmse;
   state.counters["iterations"] = result.iterations;
+  for (const DepthStage& stage : result.stages) {
+    state.counters["ms_d" + std::to_string(stage.depth)] = 1e3 * stage.seconds;
+    state.counters["it_d" + std::to_string(stage.depth)] = stage.iterations;
+    state.counters["prep_ms_d" + std::to_string(stage.depth)] = 1e3 * stage.prepare_seconds;
+  }
 }
 
 void BM_RefineLidar(benchmark::State& state) {
