@@ -278,6 +278,7 @@ Linearization Linearize(const Octree& source, const Octree& target, DepthData& d
   const double prior_scale = static_cast<double>(corr.size()) / prior_sum;
   const double c2 =
       options.robust_scale_cells * options.robust_scale_cells / (2.0 * options.covariance_epsilon);
+  const double inlier_distance = options.inlier_distance_cells * data.edge_target;
   double weight_sum = 0.0;
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
   for (Correspondence& c : corr) {
@@ -296,9 +297,9 @@ Linearization Linearize(const Octree& source, const Octree& target, DepthData& d
     c.weight *= prior_scale * c.robust;
     weight_sum += c.weight;
     centroid += c.weight * c.target_mean;
-    if (c.robust >= 0.25) {  // e2 <= c2: within robust_scale_cells of the partner's plane
+    const double dist = tn.planar ? std::abs(tn.normal.dot(r)) : r.norm();
+    if (dist <= inlier_distance) {
       const double count = s_level.count[data.source_nodes[c.k]];
-      const double dist = tn.planar ? std::abs(tn.normal.dot(r)) : r.norm();
       lin.inlier_count += count;
       lin.inlier_sq_sum += count * dist * dist;
       ++lin.inlier_nodes;
@@ -383,7 +384,8 @@ absl::Status ValidateInputs(const Octree& source, const Octree& target,
   }
   if (!(o.rotation_epsilon_rad > 0) || !(o.translation_epsilon_cells > 0) ||
       !(o.max_correspondence_distance_cells > 0) || !(o.covariance_epsilon > 0) ||
-      !(o.covariance_epsilon <= 1) || !(o.robust_scale_cells > 0) || !(o.damping >= 0) ||
+      !(o.covariance_epsilon <= 1) || !(o.robust_scale_cells > 0) ||
+      !(o.inlier_distance_cells > 0) || !(o.fitness_min_mean_count >= 0) || !(o.damping >= 0) ||
       !(o.coarse_epsilon_factor >= 1) || !(o.degeneracy_threshold >= 0) || !(o.min_fitness >= 0)) {
     return absl::InvalidArgumentError(
         "RefineOnTrees: epsilons, distances and scales must be positive (covariance_epsilon in "
@@ -497,12 +499,27 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
 
   result.T_target_source = MakeIsometry(R, t);
   result.converged = all_converged;
+  AnalyseDegeneracy(final_lin, options, result);  // the finest depth's information
+  // Fitness is measured where the source's cells hold surface patches rather than single
+  // samples: at depths finer than the sampling, a node's partner is often more than a cell away
+  // although the surfaces coincide, and the fraction would read as partial overlap.
+  int fitness_depth = finest;
+  while (fitness_depth > coarsest &&
+         static_cast<double>(source.num_points()) <
+             options.fitness_min_mean_count *
+                 static_cast<double>(source.level(fitness_depth).size())) {
+    --fitness_depth;
+  }
+  result.fitness_depth = fitness_depth;
+  if (fitness_depth != finest) {
+    DepthData data = PrepareDepth(source, target, fitness_depth, options);
+    final_lin = Linearize(source, target, data, R, t, options, corr);
+  }
   result.inliers = final_lin.inlier_nodes;
   result.fitness = final_lin.used_count > 0 ? final_lin.inlier_count / final_lin.used_count : 0.0;
   result.inlier_rmse = final_lin.inlier_count > 0
                            ? std::sqrt(final_lin.inlier_sq_sum / final_lin.inlier_count)
                            : 0.0;
-  AnalyseDegeneracy(final_lin, options, result);
   if (result.fitness < options.min_fitness) {
     result.failure_reason =
         absl::StrCat("fitness ", result.fitness, " below min_fitness ", options.min_fitness,

@@ -87,6 +87,16 @@ struct TreeRefinementOptions {
   // c^2 = robust_scale_cells^2 / (2 covariance_epsilon): a plane-to-plane offset of
   // robust_scale_cells cell edges along the normal gets weight 1/4 at any depth.
   double robust_scale_cells = 0.25;
+  // Fitness and inlier RMSE count a source node as an inlier when its partner's plane (the
+  // target node's normal; the CoM for isotropic nodes) lies within this many cell edges of its
+  // moved CoM at the finest depth. Half a cell: two independent samples of one surface put their
+  // cell CoMs up to a few tenths of a cell apart along the normal where it curves.
+  double inlier_distance_cells = 0.5;
+  // They are measured at the finest depth whose source nodes hold at least this many points on
+  // average (never coarser than coarsest_depth): finer cells than the sampling split a surface
+  // into single samples whose partners are often beyond a cell, which would read as partial
+  // overlap (a 2,048-point object at depth 6 does; depth 5 holds ~3-4 points a node).
+  double fitness_min_mean_count = 3.0;
   WeightScheme weights = WeightScheme::kInverseDensity;
   // Source nodes used per depth at most (an even stride over the Morton order keeps the spatial
   // spread): bounds the cost on 120k-point scans, whose fine depths hold ~50k nodes.
@@ -127,12 +137,14 @@ struct TreeRefinementResult {
   // Every depth stopped by the epsilon test (not by max_iterations_per_depth).
   bool converged = false;
   int iterations = 0;  // Gauss-Newton iterations over all depths
-  // Finest depth: fraction of the source's points (by node count) whose node has an inlier
-  // correspondence (robust weight >= 1/4), and the RMS of their distances to the partner's plane
-  // (the target node's normal; the CoM distance for isotropic nodes), metres.
+  // At fitness_depth (see TreeRefinementOptions::fitness_min_mean_count): fraction of the source's
+  // points (by node count) whose node has an inlier correspondence within inlier_distance_cells of
+  // the partner's plane, and the RMS of their distances to the partner's plane (the target node's
+  // normal; the CoM distance for isotropic nodes), metres.
   double fitness = 0.0;
   double inlier_rmse = 0.0;
-  int inliers = 0;  // nodes
+  int inliers = 0;        // nodes
+  int fitness_depth = 0;  // where fitness and inlier_rmse were measured
   // 6x6 Gauss-Newton information (J^T W J) at the final transform, finest depth, ordered
   // (rotation x, y, z [1/rad^2], translation x, y, z [1/m^2]) for a perturbation applied in the
   // TARGET frame about `information_center`: T <- [exp(w) | c - exp(w) c + v] T. Weights are
