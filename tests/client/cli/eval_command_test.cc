@@ -104,8 +104,8 @@ TEST_F(EvalCommandTest, StudyHasTheTwentyOneSettings) {
 TEST_F(EvalCommandTest, BadInputSaysWhatToFix) {
   EXPECT_EQ(Run("eval --count 1"), 2);
   EXPECT_THAT(stderr_, HasSubstr("--output"));
-  EXPECT_EQ(Run(absl::StrCat("eval --mode refine --output ", Path("x.csv"))), 2);
-  EXPECT_THAT(stderr_, HasSubstr("not available yet"));
+  EXPECT_EQ(Run(absl::StrCat("eval --mode icp --output ", Path("x.csv"))), 2);
+  EXPECT_THAT(stderr_, HasSubstr("net, net+refine or refine"));
   EXPECT_EQ(Run(absl::StrCat("eval --model ", Path("missing.rpsrw"), " --output ", Path("x.csv"))),
             1);
   EXPECT_THAT(stderr_, HasSubstr("missing.rpsrw"));
