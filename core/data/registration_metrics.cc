@@ -26,7 +26,8 @@ PairError ErrorOf(const Eigen::Isometry3d& estimate, const Eigen::Isometry3d& tr
 }
 
 std::string RecallThreshold::Name() const {
-  return absl::StrCat("recall@", rotation_deg, "deg,", translation);
+  // No comma: the name is a CSV column header.
+  return absl::StrCat("recall@", rotation_deg, "deg/", translation);
 }
 
 ErrorSummary Summarize(const std::vector<PairError>& errors,

@@ -22,7 +22,7 @@ PairError ErrorOf(const Eigen::Isometry3d& estimate, const Eigen::Isometry3d& tr
 struct RecallThreshold {
   double rotation_deg = 1.0;
   double translation = 0.01;
-  std::string Name() const;  // e.g. "recall@1deg,0.01"
+  std::string Name() const;  // e.g. "recall@1deg/0.01"
 };
 
 struct ErrorSummary {

@@ -84,6 +84,8 @@ TEST_F(EvalCommandTest, ManifestRowsAndSummaryAgree) {
       absl::StrSplit(Read(Path("out/eval.csv.summary.csv")), '\n', absl::SkipEmpty());
   ASSERT_EQ(summary.size(), 2u);
   std::vector<std::string> fields = absl::StrSplit(summary[1], ',');
+  // Every column name is one CSV field (a name with a comma once broke the header).
+  EXPECT_EQ(std::vector<std::string>(absl::StrSplit(summary[0], ',')).size(), fields.size());
   double rmse = 0.0;
   ASSERT_TRUE(absl::SimpleAtod(fields[2], &rmse));
   EXPECT_NEAR(rmse, std::sqrt(sum_sq / 6.0), 1e-3 * (1 + rmse));

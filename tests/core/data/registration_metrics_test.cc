@@ -29,7 +29,7 @@ TEST(RegistrationMetricsTest, SummaryStatisticsAndRecall) {
   ASSERT_EQ(s.recall.size(), 2u);
   EXPECT_DOUBLE_EQ(s.recall[0], 0.25);  // only (0.5, 0.005) is within (1 deg, 0.01)
   EXPECT_DOUBLE_EQ(s.recall[1], 0.5);   // and (2.0, 0.02) within (5 deg, 0.05)
-  EXPECT_EQ(ObjectRecallThresholds()[0].Name(), "recall@1deg,0.01");
+  EXPECT_EQ(ObjectRecallThresholds()[0].Name(), "recall@1deg/0.01");
 }
 
 TEST(RegistrationMetricsTest, EmptyIsZero) {
