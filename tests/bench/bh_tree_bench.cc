@@ -71,8 +71,8 @@ void BuildAndReport(benchmark::State& state, const PointCloud& cloud,
   ReportTree(state, cloud, *BuildOctree(cloud, options));
 }
 
-// neighbor_depth 99 (capped at depth): neighbour tables at every depth. neighbor_depth = 5 is what the
-// service caches for a LiDAR scan: deep levels for refinement, neighbour tables only where the
+// neighbor_depth 99 (capped at depth): neighbour tables at every depth. neighbor_depth = 5 is what
+// the service caches for a LiDAR scan: deep levels for refinement, neighbour tables only where the
 // network's tree convolutions gather.
 void BM_BuildTreeLidar(benchmark::State& state) {
   const PointCloud cloud = SimulatedUrbanScan(static_cast<size_t>(state.range(0)));
