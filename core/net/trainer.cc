@@ -16,7 +16,7 @@
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
-#include "core/data/transform_convention.h"
+#include "core/data/registration_metrics.h"
 #include "core/io/file_bytes.h"
 #include "core/net/registration_loss.h"
 #include "core/net/rpsr_net_impl.h"
@@ -24,8 +24,6 @@
 
 namespace rpsr::core {
 namespace {
-
-constexpr double kRadToDeg = 180.0 / M_PI;
 
 // A pair ready for the network: its trees and the truth.
 struct TreePair {
@@ -146,42 +144,19 @@ torch::Tensor ToTensor(const std::vector<Eigen::Isometry3d>& estimates, bool rot
   return out;
 }
 
-struct ValidationErrors {
-  double rotation_rmse_deg = 0.0;
-  double rotation_median_deg = 0.0;
-  double translation_rmse = 0.0;
-};
-
-absl::StatusOr<ValidationErrors> Validate(RpsrNet& net, const std::vector<TreePair>& pairs,
-                                          int batch_size, int passes) {
-  std::vector<double> rotation_errors;
-  double rotation_sq = 0.0;
-  double translation_sq = 0.0;
+absl::StatusOr<ErrorSummary> Validate(RpsrNet& net, const std::vector<TreePair>& pairs,
+                                      int batch_size, int passes) {
+  std::vector<PairError> errors;
   for (size_t begin = 0; begin < pairs.size(); begin += batch_size) {
     const size_t end = std::min(pairs.size(), begin + batch_size);
     std::vector<NetPair> batch = AsNetPairs(pairs, begin, end);
     absl::StatusOr<std::vector<NetEstimate>> estimates = net.Estimate(batch, passes);
     if (!estimates.ok()) return estimates.status();
     for (size_t i = begin; i < end; ++i) {
-      const Eigen::Isometry3d& est = (*estimates)[i - begin].T_target_source;
-      const double r =
-          RotationErrorRad(pairs[i].T_target_source.linear(), est.linear()) * kRadToDeg;
-      const double t = TranslationError(pairs[i].T_target_source.translation(), est.translation());
-      rotation_errors.push_back(r);
-      rotation_sq += r * r;
-      translation_sq += t * t;
+      errors.push_back(ErrorOf((*estimates)[i - begin].T_target_source, pairs[i].T_target_source));
     }
   }
-  ValidationErrors errors;
-  const double n = std::max<double>(1.0, rotation_errors.size());
-  errors.rotation_rmse_deg = std::sqrt(rotation_sq / n);
-  errors.translation_rmse = std::sqrt(translation_sq / n);
-  if (!rotation_errors.empty()) {
-    std::nth_element(rotation_errors.begin(), rotation_errors.begin() + rotation_errors.size() / 2,
-                     rotation_errors.end());
-    errors.rotation_median_deg = rotation_errors[rotation_errors.size() / 2];
-  }
-  return errors;
+  return Summarize(errors, {});
 }
 
 }  // namespace
@@ -377,7 +352,7 @@ absl::StatusOr<std::vector<EpochRecord>> TrainRpsrNet(
       record.sigma_translation = sigma_t.item<double>();
 
       impl.network->eval();
-      absl::StatusOr<ValidationErrors> errors =
+      absl::StatusOr<ErrorSummary> errors =
           Validate(net, *validation_pairs, options.batch_size, options.passes);
       if (!errors.ok()) return errors.status();
       record.validation_rotation_rmse_deg = errors->rotation_rmse_deg;
