@@ -60,23 +60,24 @@ TEST(ShippedObjectModelTest, LoadsAndBeatsIdentityOnUnseenClasses) {
   // Batched = one by one, now on the rotation itself. Different batch sizes run different GEMM
   // blockings, whose float32 rounding (1e-6 in the scores) the SVD of soft correspondences
   // amplifies to ~0.01 degrees; over three passes a re-binned node may also cross a cell
-  // boundary. Both stay far below the model's error.
+  // boundary. Measured here: up to 0.01 degrees; the bounds leave room for another CPU's BLAS
+  // kernels, and both stay far below the model's error (a batching bug moves degrees).
   auto one_pass = (*net)->Estimate(pairs, 1);
   ASSERT_TRUE(one_pass.ok());
   for (int i = 0; i < 4; ++i) {
     auto single = (*net)->Estimate({&pairs[i], 1}, 1);
     ASSERT_TRUE(single.ok());
-    EXPECT_LT(RotationErrorDeg((*single)[0].T_target_source, (*one_pass)[i].T_target_source), 0.02)
+    EXPECT_LT(RotationErrorDeg((*single)[0].T_target_source, (*one_pass)[i].T_target_source), 0.05)
         << "pair " << i;
     auto single_all = (*net)->Estimate({&pairs[i], 1});
     ASSERT_TRUE(single_all.ok());
     EXPECT_LT(RotationErrorDeg((*single_all)[0].T_target_source, (*estimates)[i].T_target_source),
-              0.05)
+              0.1)
         << "pair " << i;
     EXPECT_LT(((*single_all)[0].T_target_source.translation() -
                (*estimates)[i].T_target_source.translation())
                   .norm(),
-              1e-3);
+              2e-3);
   }
 }
 
