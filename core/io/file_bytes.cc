@@ -1,5 +1,8 @@
 #include "core/io/file_bytes.h"
 
+#include <unistd.h>
+
+#include <atomic>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
@@ -41,7 +44,11 @@ absl::StatusOr<std::string> ReadFileBytes(const std::string& path, size_t max_by
 }
 
 absl::Status WriteFileBytes(const std::string& path, absl::string_view bytes) {
-  const std::string temporary = absl::StrCat(path, ".tmp-rpsr");
+  // Unique per process and call, so that concurrent writers of one path (two processes, two
+  // threads) never share a temporary file; the last rename wins whole.
+  static std::atomic<uint64_t> counter{0};
+  const std::string temporary =
+      absl::StrCat(path, ".tmp-rpsr-", getpid(), "-", counter.fetch_add(1));
   {
     std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
     if (!out) {

@@ -2,6 +2,7 @@
 
 #include <filesystem>
 #include <string>
+#include <thread>
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
@@ -20,11 +21,35 @@ TEST(FileBytesTest, WritesAndReadsBackBinaryBytes) {
 }
 
 TEST(FileBytesTest, OverwriteReplacesAndLeavesNoTemporary) {
-  const std::string path = testing::TempDir() + "/overwrite.dat";
+  const std::filesystem::path dir = std::filesystem::path(testing::TempDir()) / "overwrite_dir";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string path = (dir / "overwrite.dat").string();
   ASSERT_TRUE(WriteFileBytes(path, "first, longer content").ok());
   ASSERT_TRUE(WriteFileBytes(path, "second").ok());
   EXPECT_EQ(*ReadFileBytes(path), "second");
-  EXPECT_FALSE(std::filesystem::exists(path + ".tmp-rpsr"));
+  int files = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(dir)) {
+    ++files;
+    EXPECT_EQ(entry.path().filename(), "overwrite.dat");
+  }
+  EXPECT_EQ(files, 1) << "no temporary file is left behind";
+}
+
+TEST(FileBytesTest, ConcurrentWritersOfOnePathNeverMixContents) {
+  const std::string path = testing::TempDir() + "/concurrent.dat";
+  const std::string a(100000, 'a');
+  const std::string b(100000, 'b');
+  std::thread writer_a([&] {
+    for (int i = 0; i < 20; ++i) EXPECT_TRUE(WriteFileBytes(path, a).ok());
+  });
+  std::thread writer_b([&] {
+    for (int i = 0; i < 20; ++i) EXPECT_TRUE(WriteFileBytes(path, b).ok());
+  });
+  writer_a.join();
+  writer_b.join();
+  const std::string read = *ReadFileBytes(path);
+  EXPECT_TRUE(read == a || read == b) << "a whole write wins";
 }
 
 TEST(FileBytesTest, MissingFileIsNotFoundNamingThePath) {

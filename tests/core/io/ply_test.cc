@@ -65,7 +65,10 @@ TEST_P(PlyRoundTripTest, MeshThroughAFile) {
   TriangleMesh mesh;
   mesh.vertices = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0.5f}};
   mesh.triangles = {{0, 1, 2}, {0, 2, 3}};
-  const std::string path = testing::TempDir() + "/mesh_round_trip.ply";
+  // One file per parameter: ctest runs the instances as parallel processes.
+  const std::string path =
+      absl::StrCat(testing::TempDir(), "/mesh_round_trip_", static_cast<int>(format), "_",
+                   static_cast<int>(coordinate_type), ".ply");
   ASSERT_TRUE(WritePly(path, mesh, format, coordinate_type).ok());
   absl::StatusOr<PlyContents> read = ReadPly(path);
   ASSERT_TRUE(read.ok()) << read.status();
