@@ -195,17 +195,14 @@ int ReadObjectSource(ObjectSource& source) {
   source.options.num_points = static_cast<size_t>(num_points);
   source.seed = absl::GetFlag(FLAGS_seed);
   source.split_name = absl::AsciiStrToLower(absl::GetFlag(FLAGS_split));
-  if (source.split_name.empty() || source.split_name == "m1") {
-    source.split_name = "m1";
-    source.options.split = core::ObjectSplit::kM1All;
-  } else if (source.split_name == "seen") {
-    source.options.split = core::ObjectSplit::kM2Seen;
-  } else if (source.split_name == "unseen") {
-    source.options.split = core::ObjectSplit::kM2Unseen;
-  } else {
+  std::optional<core::ObjectSplit> split =
+      ParseObjectSplitFlag(source.split_name, core::ObjectSplit::kM1All);
+  if (!split) {
     return Fail(kBadFlags, absl::StrCat("unknown --split '", source.split_name,
                                         "' for objects: use m1, seen or unseen"));
   }
+  source.options.split = *split;
+  if (source.split_name.empty()) source.split_name = "m1";
   std::optional<std::string> extension = CloudExtension("ply");
   if (!extension) {
     return Fail(kBadFlags, absl::StrCat("unknown --format '", absl::GetFlag(FLAGS_format),

@@ -73,16 +73,10 @@ absl::StatusOr<EvalPair> MakeEvalPair(const core::PointCloud& source,
 absl::StatusOr<std::vector<Setting>> ObjectSettings(
     const core::BarnesHutTreeOptions& tree_options) {
   core::PairOptions base;
-  const std::string split = absl::GetFlag(FLAGS_split);
-  if (split == "" || split == "unseen") {
-    base.split = core::ObjectSplit::kM2Unseen;
-  } else if (split == "seen") {
-    base.split = core::ObjectSplit::kM2Seen;
-  } else if (split == "m1") {
-    base.split = core::ObjectSplit::kM1All;
-  } else {
-    return absl::InvalidArgumentError("--split must be m1, seen or unseen");
-  }
+  std::optional<core::ObjectSplit> split =
+      ParseObjectSplitFlag(absl::GetFlag(FLAGS_split), core::ObjectSplit::kM2Unseen);
+  if (!split) return absl::InvalidArgumentError("--split must be m1, seen or unseen");
+  base.split = *split;
   base.num_points = absl::GetFlag(FLAGS_num_points);
   std::vector<std::pair<core::DisturbanceKind, int>> kinds;
   if (absl::GetFlag(FLAGS_study)) {

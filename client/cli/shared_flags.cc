@@ -2,6 +2,7 @@
 #include "client/cli/shared_flags.h"
 
 #include "absl/flags/flag.h"
+#include "absl/strings/ascii.h"
 
 ABSL_FLAG(std::string, output, "",
           "the folder written: train: model.rpsrw, last.rpsrw, the state and the log; data: the "
@@ -42,6 +43,16 @@ std::optional<core::DisturbanceKind> ParseDisturbanceFlag(const std::string& nam
   if (name == "outliers") return core::DisturbanceKind::kUniformOutliers;
   if (name == "crop") return core::DisturbanceKind::kCrop;
   if (name == "jitter") return core::DisturbanceKind::kJitter;
+  return std::nullopt;
+}
+
+std::optional<core::ObjectSplit> ParseObjectSplitFlag(const std::string& name,
+                                                      core::ObjectSplit empty_means) {
+  const std::string lower = absl::AsciiStrToLower(name);
+  if (lower.empty()) return empty_means;
+  if (lower == "m1") return core::ObjectSplit::kM1All;
+  if (lower == "seen") return core::ObjectSplit::kM2Seen;
+  if (lower == "unseen") return core::ObjectSplit::kM2Unseen;
   return std::nullopt;
 }
 

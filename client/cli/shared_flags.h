@@ -11,6 +11,7 @@
 
 #include "absl/flags/declare.h"
 #include "core/data/disturbances.h"
+#include "core/data/object_pairs.h"
 
 ABSL_DECLARE_FLAG(std::string, output);
 ABSL_DECLARE_FLAG(std::string, protocol);
@@ -28,6 +29,11 @@ namespace rpsr::client {
 
 // The --disturbance names: none, noise, outliers, crop, jitter; nullopt for anything else.
 std::optional<core::DisturbanceKind> ParseDisturbanceFlag(const std::string& name);
+
+// The --split names of the object protocol: m1, seen, unseen (any case); an empty name gives
+// `empty_means`; nullopt for anything else.
+std::optional<core::ObjectSplit> ParseObjectSplitFlag(const std::string& name,
+                                                      core::ObjectSplit empty_means);
 
 }  // namespace rpsr::client
 

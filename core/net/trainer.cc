@@ -109,25 +109,7 @@ absl::Status ReadState(const std::string& path, TrainerState& state, double& sig
   return absl::OkStatus();
 }
 
-torch::Tensor RotationsOf(const std::vector<TreePair>& pairs, size_t begin, size_t end) {
-  torch::Tensor R = torch::empty({static_cast<int64_t>(end - begin), 3, 3}, torch::kFloat32);
-  for (size_t i = begin; i < end; ++i) {
-    const Eigen::Matrix<float, 3, 3, Eigen::RowMajor> r =
-        pairs[i].T_target_source.linear().cast<float>();
-    std::copy(r.data(), r.data() + 9, R.data_ptr<float>() + (i - begin) * 9);
-  }
-  return R;
-}
-
-torch::Tensor TranslationsOf(const std::vector<TreePair>& pairs, size_t begin, size_t end) {
-  torch::Tensor t = torch::empty({static_cast<int64_t>(end - begin), 3}, torch::kFloat32);
-  for (size_t i = begin; i < end; ++i) {
-    const Eigen::Vector3f v = pairs[i].T_target_source.translation().cast<float>();
-    std::copy(v.data(), v.data() + 3, t.data_ptr<float>() + (i - begin) * 3);
-  }
-  return t;
-}
-
+// Rotations [B, 3, 3] (rotation = true) or translations [B, 3] of isometries, as float32.
 torch::Tensor ToTensor(const std::vector<Eigen::Isometry3d>& estimates, bool rotation) {
   const int64_t b = static_cast<int64_t>(estimates.size());
   torch::Tensor out = torch::empty(
@@ -283,8 +265,10 @@ absl::StatusOr<std::vector<EpochRecord>> TrainRpsrNet(
             train, first, options.batch_size, options.data_threads, options.tree_options);
         if (!pairs.ok()) return pairs.status();
         std::vector<NetPair> batch = AsNetPairs(*pairs, 0, pairs->size());
-        torch::Tensor R_gt = RotationsOf(*pairs, 0, pairs->size()).to(device);
-        torch::Tensor t_gt = TranslationsOf(*pairs, 0, pairs->size()).to(device);
+        std::vector<Eigen::Isometry3d> truths;
+        for (const TreePair& pair : *pairs) truths.push_back(pair.T_target_source);
+        torch::Tensor R_gt = ToTensor(truths, true).to(device);
+        torch::Tensor t_gt = ToTensor(truths, false).to(device);
 
         absl::StatusOr<net::PackedClouds> targets = net::PackTargets(batch);
         if (!targets.ok()) return targets.status();
