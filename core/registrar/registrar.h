@@ -1,0 +1,139 @@
+// The registration pipeline (issue 5): one call that returns the best pose rpsr can give and says
+// how far to trust it. Network (core/net) -> refinement on the trees (core/refine) -> calibrated
+// confidence (core/registrar/confidence_model.h).
+//
+// Plain C++ and Eigen only: LibTorch stays behind RpsrNet's pimpl, so the server and the client
+// compile against this header without it.
+//
+// Conventions: T_target_source maps source points into the target frame
+// (core/data/transform_convention.h); metres (the clouds' units), radians, seconds.
+#ifndef RPSR_CORE_REGISTRAR_REGISTRAR_H_
+#define RPSR_CORE_REGISTRAR_REGISTRAR_H_
+
+#include <array>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "Eigen/Core"
+#include "Eigen/Geometry"
+#include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
+#include "absl/types/span.h"
+#include "core/refine/tree_refinement.h"
+#include "core/tree/bh_tree.h"
+
+namespace rpsr::core {
+
+class RpsrNet;
+class ConfidenceModel;
+
+// What a registration runs, so users can compare and fall back.
+enum class RegistrationMode {
+  kNet,        // the network alone
+  kNetRefine,  // the network, then refinement on the trees from its estimate (the default)
+  kRefine,     // refinement alone, from identity or the caller's initial guess
+};
+// "net", "net+refine", "refine"; InvalidArgument naming the accepted values otherwise.
+absl::StatusOr<RegistrationMode> ParseRegistrationMode(absl::string_view name);
+absl::string_view RegistrationModeName(RegistrationMode mode);
+
+struct RegistrationOptions {
+  RegistrationMode mode = RegistrationMode::kNetRefine;
+  // Network passes; <= 0 uses the model's default (RpsrNetConfig::passes).
+  int passes = 0;
+  // A starting guess of T_target_source. The network starts from it (its passes estimate the
+  // remaining motion); `refine` starts from it (identity when absent).
+  std::optional<Eigen::Isometry3d> initial_T_target_source;
+  TreeRefinementOptions refinement;
+};
+
+// Seconds spent per stage of one pair (in a batch, the network's time is the batch's divided
+// evenly among its pairs).
+struct RegistrationTimings {
+  double net_seconds = 0.0;
+  double refine_seconds = 0.0;
+  double confidence_seconds = 0.0;
+  double total_seconds = 0.0;
+};
+
+struct RegistrationResult {
+  Eigen::Isometry3d T_target_source = Eigen::Isometry3d::Identity();
+  // false: do not use T. failure_reason says why in words a user can act on (no overlap, too
+  // little fitness, degenerate geometry naming the axes, the network's output not finite).
+  bool valid = false;
+  std::string failure_reason;
+  // Calibrated probability that T is within (1 degree, 1% of the target's extent) of the truth.
+  // 0 when invalid; low (never confident) when the geometry is degenerate.
+  double confidence = 0.0;
+  // From the refinement's last depth (see TreeRefinementResult); for mode kNet they are measured
+  // by one evaluation of the refinement's cost at the network's estimate, without updates.
+  double fitness = 0.0;      // overlap fraction of the source's points
+  double inlier_rmse = 0.0;  // metres
+  int iterations = 0;        // refinement Gauss-Newton iterations (0 for kNet)
+  bool converged = false;
+  Eigen::Matrix<double, 6, 6> information = Eigen::Matrix<double, 6, 6>::Zero();
+  std::array<bool, 6> degenerate_axes = {};  // rotation x, y, z, translation x, y, z
+  int num_degenerate = 0;
+  // The network's estimate before refinement (identity / the initial guess in mode kRefine) and
+  // its mean peak score (an input of the confidence).
+  Eigen::Isometry3d net_T_target_source = Eigen::Isometry3d::Identity();
+  double net_score_peak = 0.0;
+  RegistrationMode mode = RegistrationMode::kNetRefine;
+  RegistrationTimings timings;
+};
+
+// One pair of a batch, with its own options (a batch gathers requests of many clients).
+struct RegistrationRequest {
+  const Octree* source = nullptr;
+  const Octree* target = nullptr;
+  RegistrationOptions options;
+};
+
+struct RegistrarConfig {
+  // Which model embedded in the binary (core/models/<name>/): "objects" (the default) or, when
+  // shipped, "lidar". Ignored when model_path is set.
+  std::string model = "objects";
+  // Weights (.rpsrw) from a file instead of an embedded model.
+  std::string model_path;
+  // Calibration of the confidence (see confidence_model.h). Empty: the one shipped beside the
+  // default model.
+  std::string confidence_path;
+};
+
+// Thread-safe: one Registrar serves many threads (the network runs in inference mode).
+class Registrar {
+ public:
+  static absl::StatusOr<std::unique_ptr<Registrar>> Create(const RegistrarConfig& config = {});
+  ~Registrar();
+  Registrar(const Registrar&) = delete;
+  Registrar& operator=(const Registrar&) = delete;
+
+  // InvalidArgument: null or empty trees, trees too shallow for the network (depth < 5) or for
+  // the refinement's depths, a non-finite or non-rigid initial guess. Geometric failures are not
+  // errors: they return valid = false with the reason.
+  absl::StatusOr<RegistrationResult> Register(const Octree& source, const Octree& target,
+                                              const RegistrationOptions& options = {}) const;
+
+  // One batched forward pass for all network modes' pairs (grouped by passes), then refinement
+  // per pair. Results equal Register() pair by pair (within the network's batching tolerance).
+  // Per-pair input errors come back as that pair's status; the others still run.
+  std::vector<absl::StatusOr<RegistrationResult>> RegisterBatch(
+      absl::Span<const RegistrationRequest> requests) const;
+  std::vector<absl::StatusOr<RegistrationResult>> RegisterBatch(
+      absl::Span<const std::pair<const Octree*, const Octree*>> pairs,
+      const RegistrationOptions& options) const;
+
+  // What the server reports as its model (name, parameters, default passes).
+  std::string model_description() const;
+
+ private:
+  Registrar();
+  struct State;
+  std::unique_ptr<State> state_;
+};
+
+}  // namespace rpsr::core
+
+#endif  // RPSR_CORE_REGISTRAR_REGISTRAR_H_
