@@ -8,6 +8,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <future>
 #include <numeric>
 #include <optional>
 #include <sstream>
@@ -258,12 +259,23 @@ absl::StatusOr<std::vector<EpochRecord>> TrainRpsrNet(
       double rotation_loss_sum = 0.0;
       double translation_loss_sum = 0.0;
       int stepped = 0;
-      for (int b = 0; b < batches; ++b) {
+      // The next batch's pairs are generated while this one trains: on a GPU the step is short
+      // and generating synchronously left the device idle most of the time.
+      auto make_batch = [&](int b) {
         const uint64_t first = (static_cast<uint64_t>(epoch - 1) * batches + b) *
                                static_cast<uint64_t>(options.batch_size);
-        absl::StatusOr<std::vector<TreePair>> pairs = MakeTreePairs(
-            train, first, options.batch_size, options.data_threads, options.tree_options);
-        if (!pairs.ok()) return pairs.status();
+        return MakeTreePairs(train, first, options.batch_size, options.data_threads,
+                             options.tree_options);
+      };
+      std::future<absl::StatusOr<std::vector<TreePair>>> next_batch =
+          std::async(std::launch::async, make_batch, 0);
+      for (int b = 0; b < batches; ++b) {
+        absl::StatusOr<std::vector<TreePair>> pairs = next_batch.get();
+        if (b + 1 < batches) next_batch = std::async(std::launch::async, make_batch, b + 1);
+        if (!pairs.ok()) {
+          if (next_batch.valid()) next_batch.wait();
+          return pairs.status();
+        }
         std::vector<NetPair> batch = AsNetPairs(*pairs, 0, pairs->size());
         std::vector<Eigen::Isometry3d> truths;
         for (const TreePair& pair : *pairs) truths.push_back(pair.T_target_source);
@@ -297,12 +309,11 @@ absl::StatusOr<std::vector<EpochRecord>> TrainRpsrNet(
         if (std::isfinite(loss_value)) {
           optimizer.zero_grad();
           loss.backward();
-          torch::nn::utils::clip_grad_norm_(parameters, options.gradient_clip_norm);
-          bool finite = true;
-          for (const torch::Tensor& p : parameters) {
-            if (p.grad().defined() && !torch::isfinite(p.grad()).all().item<bool>()) finite = false;
-          }
-          if (finite) {
+          // The total norm is non-finite iff some gradient is: one device sync instead of one
+          // per parameter tensor.
+          const double grad_norm =
+              torch::nn::utils::clip_grad_norm_(parameters, options.gradient_clip_norm);
+          if (std::isfinite(grad_norm)) {
             optimizer.step();
             loss_sum += loss_value;
             rotation_loss_sum += rotation_loss.item<double>();
