@@ -38,6 +38,8 @@ packages=(
   # clang + its sanitizer/libFuzzer runtime build the PLY and PCD fuzzers (tests/fuzz/);
   # clang-format checks the style in tests/run.sh.
   clang clang-format libclang-rt-14-dev
+  # promtool (Debian's prometheus), docker-compose, yamllint and jq check deploy/ (tests/deploy/).
+  prometheus docker-compose yamllint jq
 )
 if [ "$with_peers" -eq 1 ]; then packages+=(libopen3d-dev libpcl-dev); fi
 
@@ -59,7 +61,14 @@ echo "setup.sh: dependencies ready after $(( $(date +%s) - start )) s"
 cmake_args=(-G Ninja -DCMAKE_BUILD_TYPE=Release)
 command -v ccache >/dev/null && cmake_args+=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
 if [ "$core_only" -eq 1 ]; then cmake_args+=(-DRPSR_CORE_ONLY=ON); fi
+# RPSR_CMAKE_ARGS adds configure options and RPSR_BUILD_TARGETS limits the build to some targets,
+# e.g. the container image (deploy/Dockerfile): RPSR_BUILD_TARGETS="rpsrd rpsr".
+read -r -a extra_cmake_args <<<"${RPSR_CMAKE_ARGS:-}"
+cmake_args+=("${extra_cmake_args[@]}")
+read -r -a build_targets <<<"${RPSR_BUILD_TARGETS:-}"
+target_args=()
+if [ ${#build_targets[@]} -gt 0 ]; then target_args=(--target "${build_targets[@]}"); fi
 cmake -S "$here" -B "$here/build" "${cmake_args[@]}"
 # Two jobs on this 2-core machine: a LibTorch TU takes ~1.5 GB, so more jobs only thrash.
-cmake --build "$here/build" -j "${RPSR_BUILD_JOBS:-2}"
+cmake --build "$here/build" -j "${RPSR_BUILD_JOBS:-2}" "${target_args[@]}"
 echo "setup.sh: done after $(( $(date +%s) - start )) s"
