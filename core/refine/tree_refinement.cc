@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "Eigen/Cholesky"
@@ -406,25 +407,45 @@ std::string DegeneracyReason(const TreeRefinementResult& result) {
                                    : absl::StrCat("; mostly ", absl::StrJoin(axes, ", ")));
 }
 
-}  // namespace
-
-absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const Octree& target,
-                                                   const Eigen::Isometry3d& initial_T_target_source,
-                                                   const TreeRefinementOptions& options) {
-  const auto start = std::chrono::steady_clock::now();
-  if (absl::Status status = ValidateInputs(source, target, initial_T_target_source, options);
-      !status.ok()) {
-    return status;
-  }
+// The depths visited (coarsest, finest), options' -1 resolved.
+std::pair<int, int> StageDepths(const Octree& source, const Octree& target,
+                                const TreeRefinementOptions& options) {
   const int deepest = std::min(source.max_depth(), target.max_depth());
   const int finest = options.finest_depth < 0 ? deepest : options.finest_depth;
   const int coarsest = options.coarsest_depth < 0 ? std::min(finest, std::max(3, finest - 4))
                                                   : options.coarsest_depth;
+  return {coarsest, finest};
+}
+
+}  // namespace
+
+absl::Status ValidateTreeRefinement(const Octree& source, const Octree& target,
+                                    const Eigen::Isometry3d& initial_T_target_source,
+                                    const TreeRefinementOptions& options) {
+  if (absl::Status status = ValidateInputs(source, target, initial_T_target_source, options);
+      !status.ok()) {
+    return status;
+  }
+  const auto [coarsest, finest] = StageDepths(source, target, options);
+  const int deepest = std::min(source.max_depth(), target.max_depth());
   if (finest > deepest || coarsest < 0 || coarsest > finest) {
     return absl::InvalidArgumentError(absl::StrCat(
         "RefineOnTrees: depths ", coarsest, "..", finest, " do not fit the trees (deepest shared ",
         "depth ", deepest, "; need 0 <= coarsest <= finest)"));
   }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const Octree& target,
+                                                   const Eigen::Isometry3d& initial_T_target_source,
+                                                   const TreeRefinementOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  if (absl::Status status =
+          ValidateTreeRefinement(source, target, initial_T_target_source, options);
+      !status.ok()) {
+    return status;
+  }
+  const auto [coarsest, finest] = StageDepths(source, target, options);
 
   TreeRefinementResult result;
   result.T_target_source = initial_T_target_source;
@@ -433,7 +454,8 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
   std::vector<Correspondence> corr;
   bool all_converged = true;
   Linearization final_lin;
-  for (int depth = coarsest; depth <= finest; ++depth) {
+  // Measuring only visits the finest depth (and the fitness depth below).
+  for (int depth = options.evaluate_only ? finest : coarsest; depth <= finest; ++depth) {
     const auto stage_start = std::chrono::steady_clock::now();
     DepthStage stage;
     stage.depth = depth;
@@ -454,7 +476,10 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
       if (stage.converged && !is_finest) break;
       lin = Linearize(source, target, data, R, t, options, corr);
       stage.correspondences = lin.correspondences;
-      if (iteration == options.max_iterations_per_depth || stage.converged) break;
+      if (iteration == options.max_iterations_per_depth || stage.converged ||
+          options.evaluate_only) {
+        break;
+      }
       if (lin.correspondences < options.min_correspondences) break;
       Matrix6d H = lin.H;
       const double mean_diag = H.diagonal().mean();
@@ -479,13 +504,15 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
       R = Eigen::Quaterniond(R).normalized().toRotationMatrix();
       ++stage.iterations;
       ++result.iterations;
+      stage.last_update_rotation_rad = angle;
+      stage.last_update_translation = v.norm();
       if (angle < rotation_epsilon && v.norm() < translation_epsilon) {
         stage.converged = true;
       }
     }
     stage.seconds = SecondsSince(stage_start);
     result.stages.push_back(stage);
-    all_converged = all_converged && stage.converged;
+    all_converged = all_converged && stage.converged && !options.evaluate_only;
     if (lin.correspondences < options.min_correspondences) {
       result.T_target_source = MakeIsometry(R, t);
       result.failure_reason = absl::StrCat(

@@ -103,6 +103,11 @@ struct TreeRefinementOptions {
   int max_source_nodes_per_depth = 6000;
   // Levenberg-Marquardt damping added to the diagonal of H (relative to its mean diagonal).
   double damping = 1e-6;
+  // Measure only: no update, the initial transform is returned as it is with the statistics of
+  // the finest depth (information, degeneracy) and the fitness and inlier RMSE, as a refinement
+  // ending there would report them. iterations 0, converged false. The registrar's mode `net`
+  // uses it to judge the network's estimate by the same yardsticks as a refined one.
+  bool evaluate_only = false;
   // Validity. A depth with fewer correspondences than this ends the refinement as invalid ("no
   // overlap"); a final fitness below min_fitness is invalid too.
   int min_correspondences = 12;
@@ -123,6 +128,10 @@ struct DepthStage {
   int correspondences = 0;  // at the last iteration
   int iterations = 0;
   bool converged = false;
+  // The last Gauss-Newton update's size: rotation (radians) and translation about the matched
+  // centroid (metres); 0 when the stage made none.
+  double last_update_rotation_rad = 0.0;
+  double last_update_translation = 0.0;
   double seconds = 0.0;          // the whole stage, preparation included
   double prepare_seconds = 0.0;  // regularising source nodes, indexing the target level
 };
@@ -162,6 +171,12 @@ struct TreeRefinementResult {
   std::vector<DepthStage> stages;  // coarse to fine
   double total_seconds = 0.0;
 };
+
+// The input checks of RefineOnTrees alone (the errors listed below), so that a caller can reject
+// a request before spending time on it.
+absl::Status ValidateTreeRefinement(const Octree& source, const Octree& target,
+                                    const Eigen::Isometry3d& initial_T_target_source,
+                                    const TreeRefinementOptions& options = {});
 
 // Refines `initial_T_target_source`. Errors (InvalidArgument): a non-finite or non-rigid initial
 // transform, empty trees, depths outside the trees or coarsest > finest, non-positive iteration

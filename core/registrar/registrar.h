@@ -82,6 +82,10 @@ struct RegistrationResult {
   double net_score_peak = 0.0;
   RegistrationMode mode = RegistrationMode::kNetRefine;
   RegistrationTimings timings;
+  // The confidence model's inputs, in the order of confidence_model.h's ConfidenceFeatureNames()
+  // (what `rpsr calibrate` fits on; for diagnosis too). Empty when the pipeline stopped before
+  // measuring (the network's output not finite).
+  std::vector<double> confidence_features;
 };
 
 // One pair of a batch, with its own options (a batch gathers requests of many clients).

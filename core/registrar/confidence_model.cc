@@ -1,0 +1,245 @@
+#include "core/registrar/confidence_model.h"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_split.h"
+#include "absl/strings/strip.h"
+
+namespace rpsr::core {
+namespace {
+
+constexpr double kRadToDeg = 180.0 / M_PI;
+
+double AngleDeg(const Eigen::Matrix3d& R) {
+  const double c = std::clamp((R.trace() - 1.0) / 2.0, -1.0, 1.0);
+  return std::acos(c) * kRadToDeg;
+}
+
+// Rotation (deg) and translation (metres) between two transforms.
+std::pair<double, double> Difference(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
+  return {AngleDeg(a.linear().transpose() * b.linear()),
+          (a.translation() - b.translation()).norm()};
+}
+
+double Sigmoid(double z) {
+  if (z >= 0) return 1.0 / (1.0 + std::exp(-z));
+  const double e = std::exp(z);
+  return e / (1.0 + e);
+}
+
+int FeatureIndex(absl::string_view name) {
+  const std::vector<std::string>& names = ConfidenceFeatureNames();
+  for (size_t i = 0; i < names.size(); ++i) {
+    if (names[i] == name) return static_cast<int>(i);
+  }
+  return -1;
+}
+
+}  // namespace
+
+const std::vector<std::string>& ConfidenceFeatureNames() {
+  static const auto* names = new std::vector<std::string>{
+      "fitness",
+      "inlier_rmse_cells",
+      "log_min_eigenvalue",
+      "converged",
+      "iterations_per_depth",
+      "log_last_update_cells",
+      "net_score_peak",
+      "log_net_pass_change_deg",
+      "net_pass_change_rel",
+      "log_refine_correction_deg",
+      "refine_correction_rel",
+      "mode_net",
+      "mode_refine",
+  };
+  return *names;
+}
+
+double ConfidenceExtent(const Octree& target) { return target.half_length(); }
+
+std::vector<double> ConfidenceFeatureVector(const ConfidenceInputs& in) {
+  std::vector<double> f(kNumConfidenceFeatures, 0.0);
+  const RegistrationResult& r = *in.result;
+  const TreeRefinementResult& refined = *in.refinement;
+  const double extent = std::max(ConfidenceExtent(*in.target), 1e-12);
+  const double fitness_edge =
+      2.0 * in.target->half_length() / static_cast<double>(uint64_t{1} << refined.fitness_depth);
+  f[kFeatureFitness] = refined.fitness;
+  f[kFeatureInlierRmseCells] = refined.inlier_rmse / std::max(fitness_edge, 1e-12);
+  f[kFeatureLogMinEigenvalue] = std::log10(std::max(refined.normalized_eigenvalues[0], 1e-6));
+  f[kFeatureConverged] = refined.converged ? 1.0 : 0.0;
+  f[kFeatureIterationsPerDepth] =
+      refined.stages.empty()
+          ? 0.0
+          : static_cast<double>(refined.iterations) / static_cast<double>(refined.stages.size());
+  if (!refined.stages.empty()) {
+    const DepthStage& last = refined.stages.back();
+    const double cells =
+        (last.last_update_translation + last.last_update_rotation_rad * in.target->half_length()) /
+        std::max(last.cell_edge, 1e-12);
+    f[kFeatureLogLastUpdateCells] = std::log10(std::max(cells, 1e-6));
+  } else {
+    f[kFeatureLogLastUpdateCells] = -6.0;
+  }
+  f[kFeatureNetScorePeak] = r.net_score_peak;
+  if (in.net_per_pass.size() >= 2) {
+    const auto [deg, metres] =
+        Difference(in.net_per_pass[in.net_per_pass.size() - 2], in.net_per_pass.back());
+    f[kFeatureLogNetPassChangeDeg] = std::log10(1.0 + deg);
+    f[kFeatureNetPassChangeRel] = metres / extent;
+  }
+  const auto [deg, metres] = Difference(in.refine_start, r.T_target_source);
+  f[kFeatureLogRefineCorrectionDeg] = std::log10(1.0 + deg);
+  f[kFeatureRefineCorrectionRel] = metres / extent;
+  f[kFeatureModeNet] = r.mode == RegistrationMode::kNet ? 1.0 : 0.0;
+  f[kFeatureModeRefine] = r.mode == RegistrationMode::kRefine ? 1.0 : 0.0;
+  for (double& v : f) {
+    if (!std::isfinite(v)) v = 0.0;
+  }
+  return f;
+}
+
+ConfidenceModel ConfidenceModel::Uncalibrated() {
+  ConfidenceModel m;
+  m.calibrated = false;
+  m.bias = 0.0;
+  // Around a well-fitted pair: fitness ~0.9, RMSE ~0.15 cells, converged.
+  m.features = {
+      {kFeatureFitness, 0.8, 0.1, 1.5},   {kFeatureInlierRmseCells, 0.2, 0.05, -1.0},
+      {kFeatureConverged, 0.5, 0.5, 0.5}, {kFeatureLogMinEigenvalue, -1.0, 0.5, 0.5},
+      {kFeatureModeNet, 0.0, 1.0, -4.0},
+  };
+  return m;
+}
+
+double ConfidenceModel::RawProbability(const std::vector<double>& x) const {
+  double z = bias;
+  for (const Feature& f : features) {
+    const double v = f.index < static_cast<int>(x.size()) ? x[f.index] : 0.0;
+    z += f.weight * (v - f.mean) / f.scale;
+  }
+  return Sigmoid(z);
+}
+
+double ConfidenceModel::Probability(const std::vector<double>& x) const {
+  const double p = RawProbability(x);
+  if (isotonic_x.empty()) return p;
+  if (p <= isotonic_x.front()) return isotonic_y.front();
+  if (p >= isotonic_x.back()) return isotonic_y.back();
+  const size_t hi = static_cast<size_t>(std::upper_bound(isotonic_x.begin(), isotonic_x.end(), p) -
+                                        isotonic_x.begin());
+  const size_t lo = hi - 1;
+  const double span = isotonic_x[hi] - isotonic_x[lo];
+  const double a = span > 0 ? (p - isotonic_x[lo]) / span : 0.5;
+  return isotonic_y[lo] + a * (isotonic_y[hi] - isotonic_y[lo]);
+}
+
+double ConfidenceModel::Confidence(const std::vector<double>& x, bool valid,
+                                   int num_degenerate) const {
+  if (!valid) return 0.0;
+  double p = Probability(x);
+  if (num_degenerate > 0) p = std::min(p, degenerate_cap);
+  return std::clamp(p, 0.0, 1.0);
+}
+
+std::string ConfidenceModel::ToText(absl::string_view comment) const {
+  std::string out = "rpsr_confidence 1\n";
+  for (absl::string_view line : absl::StrSplit(comment, '\n', absl::SkipEmpty())) {
+    absl::StrAppend(&out, "# ", line, "\n");
+  }
+  absl::StrAppendFormat(&out, "bias %.17g\n", bias);
+  const std::vector<std::string>& names = ConfidenceFeatureNames();
+  for (const Feature& f : features) {
+    absl::StrAppendFormat(&out, "feature %s %.17g %.17g %.17g\n", names[f.index], f.mean, f.scale,
+                          f.weight);
+  }
+  if (!isotonic_x.empty()) {
+    out += "isotonic";
+    for (size_t i = 0; i < isotonic_x.size(); ++i) {
+      absl::StrAppendFormat(&out, " %.17g %.17g", isotonic_x[i], isotonic_y[i]);
+    }
+    out += "\n";
+  }
+  absl::StrAppendFormat(&out, "degenerate_cap %.17g\n", degenerate_cap);
+  return out;
+}
+
+absl::StatusOr<ConfidenceModel> ConfidenceModel::Parse(absl::string_view text) {
+  ConfidenceModel m;
+  bool header = false;
+  int line_number = 0;
+  auto error = [&](absl::string_view what) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("confidence calibration line ", line_number, ": ", what));
+  };
+  for (absl::string_view raw : absl::StrSplit(text, '\n')) {
+    ++line_number;
+    absl::string_view line = raw.substr(0, raw.find('#'));
+    line = absl::StripAsciiWhitespace(line);
+    if (line.empty()) continue;
+    std::vector<absl::string_view> tokens =
+        absl::StrSplit(line, absl::ByAnyChar(" \t"), absl::SkipEmpty());
+    std::vector<double> numbers;
+    for (size_t i = 1; i < tokens.size(); ++i) {
+      double v = 0.0;
+      if (tokens[0] == "feature" && i == 1) continue;
+      if (!absl::SimpleAtod(tokens[i], &v) || !std::isfinite(v)) {
+        return error(absl::StrCat("'", tokens[i], "' is not a finite number"));
+      }
+      numbers.push_back(v);
+    }
+    if (!header) {
+      if (tokens[0] != "rpsr_confidence" || numbers.size() != 1 || numbers[0] != 1) {
+        return error("expected the header 'rpsr_confidence 1'");
+      }
+      header = true;
+    } else if (tokens[0] == "bias") {
+      if (numbers.size() != 1) return error("bias takes one number");
+      m.bias = numbers[0];
+    } else if (tokens[0] == "feature") {
+      if (tokens.size() != 5) return error("feature takes a name, mean, scale and weight");
+      Feature f;
+      f.index = FeatureIndex(tokens[1]);
+      if (f.index < 0) return error(absl::StrCat("unknown feature '", tokens[1], "'"));
+      f.mean = numbers[0];
+      f.scale = numbers[1];
+      f.weight = numbers[2];
+      if (!(f.scale > 0)) return error("a feature's scale must be positive");
+      m.features.push_back(f);
+    } else if (tokens[0] == "isotonic") {
+      if (numbers.size() < 4 || numbers.size() % 2 != 0) {
+        return error("isotonic takes at least two (x, y) pairs");
+      }
+      for (size_t i = 0; i < numbers.size(); i += 2) {
+        m.isotonic_x.push_back(numbers[i]);
+        m.isotonic_y.push_back(numbers[i + 1]);
+      }
+      for (size_t i = 0; i < m.isotonic_x.size(); ++i) {
+        if (m.isotonic_y[i] < 0 || m.isotonic_y[i] > 1) return error("isotonic y outside [0, 1]");
+        if (i > 0 &&
+            (m.isotonic_x[i] < m.isotonic_x[i - 1] || m.isotonic_y[i] < m.isotonic_y[i - 1])) {
+          return error("isotonic points must be ascending in x and non-decreasing in y");
+        }
+      }
+    } else if (tokens[0] == "degenerate_cap") {
+      if (numbers.size() != 1 || numbers[0] < 0 || numbers[0] > 1) {
+        return error("degenerate_cap takes one number in [0, 1]");
+      }
+      m.degenerate_cap = numbers[0];
+    } else {
+      return error(absl::StrCat("unknown key '", tokens[0], "'"));
+    }
+  }
+  if (!header) return absl::InvalidArgumentError("confidence calibration: empty text");
+  return m;
+}
+
+}  // namespace rpsr::core

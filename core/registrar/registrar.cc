@@ -1,0 +1,329 @@
+#include "core/registrar/registrar.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <map>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "core/io/file_bytes.h"
+#include "core/net/rpsr_net.h"
+#include "core/registrar/confidence_model.h"
+#include "core/registrar/embedded_models.h"
+
+namespace rpsr::core {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double SecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+// The network reads depths 2..5 with neighbour tables to depth 5 (net_input.h).
+constexpr int kNetMinDepth = 5;
+
+bool UsesNet(RegistrationMode mode) { return mode != RegistrationMode::kRefine; }
+
+absl::Status CheckRigid(const Eigen::Isometry3d& T) {
+  const Eigen::Matrix4d& m = T.matrix();
+  if (!m.allFinite()) {
+    return absl::InvalidArgumentError("initial_T_target_source is not finite");
+  }
+  const Eigen::Matrix3d R = m.topLeftCorner<3, 3>();
+  if (!(R.transpose() * R).isApprox(Eigen::Matrix3d::Identity(), 1e-6) ||
+      std::abs(R.determinant() - 1.0) > 1e-6 ||
+      !m.bottomRows<1>().isApprox(Eigen::RowVector4d(0, 0, 0, 1), 1e-12)) {
+    return absl::InvalidArgumentError(
+        "initial_T_target_source is not rigid (its 3x3 block must be a rotation: orthonormal, "
+        "determinant +1)");
+  }
+  return absl::OkStatus();
+}
+
+absl::Status CheckTree(const Octree* tree, absl::string_view which, RegistrationMode mode) {
+  if (tree == nullptr) return absl::InvalidArgumentError(absl::StrCat("the ", which, " is null"));
+  if (tree->max_depth() < 0 || tree->num_points() == 0) {
+    return absl::InvalidArgumentError(absl::StrCat("the ", which, " tree is empty"));
+  }
+  if (UsesNet(mode) &&
+      (tree->max_depth() < kNetMinDepth || tree->neighbor_max_depth() < kNetMinDepth)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("the ", which, " tree is too shallow for the network (depth ",
+                     tree->max_depth(), ", neighbour tables to depth ", tree->neighbor_max_depth(),
+                     "; mode ", RegistrationModeName(mode), " needs both >= ", kNetMinDepth,
+                     ", the BarnesHutTreeOptions defaults)"));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ValidateRequest(const Octree* source, const Octree* target,
+                             const RegistrationOptions& options) {
+  if (absl::Status s = CheckTree(source, "source", options.mode); !s.ok()) return s;
+  if (absl::Status s = CheckTree(target, "target", options.mode); !s.ok()) return s;
+  const Eigen::Isometry3d initial =
+      options.initial_T_target_source.value_or(Eigen::Isometry3d::Identity());
+  if (absl::Status s = CheckRigid(initial); !s.ok()) return s;
+  // The refinement's own checks (depths within the trees, option ranges); mode net measures with
+  // the same options.
+  if (absl::Status s = ValidateTreeRefinement(*source, *target, initial, options.refinement);
+      !s.ok()) {
+    return absl::InvalidArgumentError(s.message());
+  }
+  return absl::OkStatus();
+}
+
+// What the network produced for one pair (empty for mode refine).
+struct NetOutput {
+  NetEstimate estimate;
+  double seconds = 0.0;
+};
+
+bool IsFiniteRigid(const Eigen::Isometry3d& T) { return T.matrix().allFinite(); }
+
+}  // namespace
+
+absl::StatusOr<RegistrationMode> ParseRegistrationMode(absl::string_view name) {
+  if (name == "net") return RegistrationMode::kNet;
+  if (name == "net+refine") return RegistrationMode::kNetRefine;
+  if (name == "refine") return RegistrationMode::kRefine;
+  return absl::InvalidArgumentError(
+      absl::StrCat("unknown registration mode '", name, "' (net, net+refine or refine)"));
+}
+
+absl::string_view RegistrationModeName(RegistrationMode mode) {
+  switch (mode) {
+    case RegistrationMode::kNet:
+      return "net";
+    case RegistrationMode::kNetRefine:
+      return "net+refine";
+    case RegistrationMode::kRefine:
+      return "refine";
+  }
+  return "unknown";
+}
+
+struct Registrar::State {
+  std::unique_ptr<RpsrNet> net;
+  ConfidenceModel confidence;
+  std::string description;
+
+  RegistrationResult Finish(const Octree& source, const Octree& target,
+                            const RegistrationOptions& options, const NetOutput* net_output,
+                            Clock::time_point start) const;
+};
+
+Registrar::Registrar() : state_(std::make_unique<State>()) {}
+Registrar::~Registrar() = default;
+
+absl::StatusOr<std::unique_ptr<Registrar>> Registrar::Create(const RegistrarConfig& config) {
+  std::unique_ptr<Registrar> registrar(new Registrar());
+  State& state = *registrar->state_;
+  std::string model_name;
+  std::optional<std::string> confidence_text;
+  std::string confidence_source;
+  if (!config.model_path.empty()) {
+    absl::StatusOr<std::unique_ptr<RpsrNet>> net = RpsrNet::Load(config.model_path);
+    if (!net.ok()) return net.status();
+    state.net = *std::move(net);
+    model_name = config.model_path;
+    // A calibration belongs to its weights: the one beside the file, if any.
+    const std::filesystem::path beside =
+        std::filesystem::path(config.model_path).parent_path() / "confidence.txt";
+    std::error_code ec;
+    if (config.confidence_path.empty() && std::filesystem::exists(beside, ec)) {
+      absl::StatusOr<std::string> text = ReadFileBytes(beside.string(), size_t{1} << 24);
+      if (!text.ok()) return text.status();
+      confidence_text = *std::move(text);
+      confidence_source = beside.string();
+    }
+  } else {
+    const std::string name =
+        config.model.empty() ? std::string(kDefaultEmbeddedModel) : config.model;
+    absl::StatusOr<EmbeddedModel> embedded = FindEmbeddedModel(name);
+    if (!embedded.ok()) return embedded.status();
+    absl::StatusOr<std::unique_ptr<RpsrNet>> net =
+        RpsrNet::LoadFromBytes(embedded->weights, absl::StrCat("embedded model '", name, "'"));
+    if (!net.ok()) return net.status();
+    state.net = *std::move(net);
+    model_name = absl::StrCat(name, " (embedded)");
+    if (config.confidence_path.empty() && embedded->confidence) {
+      confidence_text = std::string(*embedded->confidence);
+      confidence_source = absl::StrCat("embedded core/models/", name, "/confidence.txt");
+    }
+  }
+  if (!config.confidence_path.empty()) {
+    absl::StatusOr<std::string> text = ReadFileBytes(config.confidence_path, size_t{1} << 24);
+    if (!text.ok()) return text.status();
+    confidence_text = *std::move(text);
+    confidence_source = config.confidence_path;
+  }
+  if (confidence_text) {
+    absl::StatusOr<ConfidenceModel> model = ConfidenceModel::Parse(*confidence_text);
+    if (!model.ok()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(confidence_source, ": ", model.status().message()));
+    }
+    state.confidence = *std::move(model);
+  } else {
+    state.confidence = ConfidenceModel::Uncalibrated();
+    confidence_source = "none shipped: uncalibrated heuristic";
+  }
+  const RpsrNetConfig& c = state.net->config();
+  state.description = absl::StrFormat(
+      "%s: RPSRNet conv widths %d/%d/%d, embedding %d, %d heads, feed-forward %d, %d "
+      "parameters, %d passes by default; confidence: %s",
+      model_name, c.conv_widths[0], c.conv_widths[1], c.conv_widths[2], c.embedding_width,
+      c.attention_heads, c.feedforward_width, state.net->NumParameters(), c.passes,
+      confidence_source);
+  return registrar;
+}
+
+std::string Registrar::model_description() const { return state_->description; }
+
+RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& target,
+                                            const RegistrationOptions& options,
+                                            const NetOutput* net_output,
+                                            Clock::time_point start) const {
+  RegistrationResult result;
+  result.mode = options.mode;
+  const Eigen::Isometry3d initial =
+      options.initial_T_target_source.value_or(Eigen::Isometry3d::Identity());
+  result.net_T_target_source = initial;
+  result.T_target_source = initial;
+  if (net_output != nullptr) {
+    result.net_T_target_source = net_output->estimate.T_target_source;
+    result.net_score_peak = net_output->estimate.score_peak;
+    result.timings.net_seconds = net_output->seconds;
+    if (!IsFiniteRigid(result.net_T_target_source)) {
+      result.T_target_source = initial;
+      result.failure_reason = "the network's output is not finite";
+      result.timings.total_seconds = SecondsSince(start) + result.timings.net_seconds;
+      return result;
+    }
+  }
+
+  // Refinement (or, in mode net, one measuring evaluation at the network's estimate).
+  const auto refine_start = Clock::now();
+  TreeRefinementOptions refinement = options.refinement;
+  Eigen::Isometry3d from = initial;
+  if (options.mode != RegistrationMode::kRefine) from = result.net_T_target_source;
+  if (options.mode == RegistrationMode::kNet) refinement.evaluate_only = true;
+  absl::StatusOr<TreeRefinementResult> refined = RefineOnTrees(source, target, from, refinement);
+  result.timings.refine_seconds = SecondsSince(refine_start);
+  if (!refined.ok()) {
+    // Inputs were validated: only an unexpected failure lands here.
+    result.T_target_source = from;
+    result.failure_reason = absl::StrCat("refinement failed: ", refined.status().message());
+    result.timings.total_seconds = SecondsSince(start) + result.timings.net_seconds;
+    return result;
+  }
+  result.T_target_source = refined->T_target_source;
+  result.valid = refined->valid;
+  result.failure_reason = refined->failure_reason;
+  result.fitness = refined->fitness;
+  result.inlier_rmse = refined->inlier_rmse;
+  result.iterations = refined->iterations;
+  result.converged = refined->converged;
+  result.information = refined->information;
+  result.degenerate_axes = refined->degenerate_axes;
+  result.num_degenerate = refined->num_degenerate;
+
+  const auto confidence_start = Clock::now();
+  ConfidenceInputs inputs;
+  inputs.result = &result;
+  inputs.refinement = &*refined;
+  inputs.source = &source;
+  inputs.target = &target;
+  if (net_output != nullptr) inputs.net_per_pass = net_output->estimate.per_pass;
+  inputs.refine_start = from;
+  result.confidence_features = ConfidenceFeatureVector(inputs);
+  result.confidence =
+      confidence.Confidence(result.confidence_features, result.valid, result.num_degenerate);
+  result.timings.confidence_seconds = SecondsSince(confidence_start);
+  result.timings.total_seconds = SecondsSince(start) + result.timings.net_seconds;
+  return result;
+}
+
+absl::StatusOr<RegistrationResult> Registrar::Register(const Octree& source, const Octree& target,
+                                                       const RegistrationOptions& options) const {
+  const RegistrationRequest request{&source, &target, options};
+  std::vector<absl::StatusOr<RegistrationResult>> results =
+      RegisterBatch(absl::MakeConstSpan(&request, 1));
+  return std::move(results.front());
+}
+
+std::vector<absl::StatusOr<RegistrationResult>> Registrar::RegisterBatch(
+    absl::Span<const std::pair<const Octree*, const Octree*>> pairs,
+    const RegistrationOptions& options) const {
+  std::vector<RegistrationRequest> requests;
+  requests.reserve(pairs.size());
+  for (const auto& [source, target] : pairs) requests.push_back({source, target, options});
+  return RegisterBatch(requests);
+}
+
+std::vector<absl::StatusOr<RegistrationResult>> Registrar::RegisterBatch(
+    absl::Span<const RegistrationRequest> requests) const {
+  std::vector<absl::StatusOr<RegistrationResult>> results(requests.size(),
+                                                          absl::UnknownError("not registered"));
+  std::vector<bool> ok(requests.size(), false);
+  for (size_t i = 0; i < requests.size(); ++i) {
+    const RegistrationRequest& r = requests[i];
+    absl::Status status = ValidateRequest(r.source, r.target, r.options);
+    if (!status.ok()) {
+      results[i] = status;
+    } else {
+      ok[i] = true;
+    }
+  }
+
+  // One batched forward pass per pass count, over every network mode's valid request.
+  std::vector<NetOutput> net_outputs(requests.size());
+  std::vector<bool> net_failed(requests.size(), false);
+  std::map<int, std::vector<size_t>> groups;
+  for (size_t i = 0; i < requests.size(); ++i) {
+    if (!ok[i] || !UsesNet(requests[i].options.mode)) continue;
+    const int passes =
+        requests[i].options.passes > 0 ? requests[i].options.passes : state_->net->config().passes;
+    groups[passes].push_back(i);
+  }
+  for (const auto& [passes, members] : groups) {
+    std::vector<NetPair> batch;
+    batch.reserve(members.size());
+    for (size_t i : members) {
+      batch.push_back(
+          {requests[i].source, requests[i].target,
+           requests[i].options.initial_T_target_source.value_or(Eigen::Isometry3d::Identity())});
+    }
+    const auto start = Clock::now();
+    absl::StatusOr<std::vector<NetEstimate>> estimates = state_->net->Estimate(batch, passes);
+    const double seconds = SecondsSince(start) / static_cast<double>(members.size());
+    for (size_t k = 0; k < members.size(); ++k) {
+      const size_t i = members[k];
+      if (!estimates.ok()) {
+        results[i] = estimates.status();
+        net_failed[i] = true;
+        continue;
+      }
+      net_outputs[i].estimate = std::move((*estimates)[k]);
+      net_outputs[i].seconds = seconds;
+    }
+  }
+
+  for (size_t i = 0; i < requests.size(); ++i) {
+    if (!ok[i] || net_failed[i]) continue;
+    const RegistrationRequest& r = requests[i];
+    const auto start = Clock::now();
+    results[i] = state_->Finish(*r.source, *r.target, r.options,
+                                UsesNet(r.options.mode) ? &net_outputs[i] : nullptr, start);
+  }
+  return results;
+}
+
+}  // namespace rpsr::core
