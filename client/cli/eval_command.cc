@@ -1,5 +1,6 @@
-// rpsr eval: runs the network on registration pairs and reports the paper's errors (Sec. 4):
-// rotation angle and translation distance, RMSE / MAE / median, recall at thresholds, time.
+// rpsr eval: registers pairs with the Registrar (core/registrar: network, refinement on the trees,
+// confidence) and reports the paper's errors (Sec. 4): rotation angle and translation distance,
+// RMSE / MAE / median, recall at thresholds, time.
 // Pairs come from a manifest (`rpsr data pairs ...`) or from the object protocol directly,
 // where --study runs the paper's ModelNet study (clean + four disturbances x five levels).
 #include <cerrno>
@@ -25,19 +26,18 @@
 #include "core/data/transform_convention.h"
 #include "core/io/point_cloud_io.h"
 #include "core/net/rpsr_net.h"
-#include "core/refine/tree_refinement.h"
+#include "core/registrar/embedded_models.h"
+#include "core/registrar/registrar.h"
 #include "core/synth/seeded_random.h"
 
-ABSL_FLAG(std::string, model, RPSR_DEFAULT_MODEL,
-          "weights file (.rpsrw); default: the shipped object model");
 ABSL_FLAG(std::string, manifest, "",
           "evaluate the pairs of this manifest (source,target,gt) instead of generating them");
 ABSL_FLAG(bool, study, false,
           "--protocol objects: run the paper's study: clean plus noise, outliers, crop and "
           "jitter at each of the five levels (--count pairs each, the same objects throughout)");
-ABSL_FLAG(std::string, mode, "net",
-          "net: the network alone; net+refine: the network, then the multi-scale GICP on the "
-          "trees (core/refine); refine: the refinement alone from the identity");
+ABSL_FLAG(std::string, mode, "net+refine",
+          "net: the network alone; net+refine (default): the network, then the multi-scale GICP "
+          "on the trees (core/refine); refine: the refinement alone from the identity");
 ABSL_FLAG(int, tree_depth, 6, "depth of the trees built from the clouds (>= 5)");
 ABSL_FLAG(std::string, recall, "",
           "recall thresholds: objects ((1 deg, 0.01) and (5 deg, 0.05)) or lidar ((1 deg, 0.3 "
@@ -156,6 +156,15 @@ absl::StatusOr<std::vector<Setting>> ManifestSettings(
   return std::vector<Setting>{std::move(setting)};
 }
 
+std::string JsonEscaped(const std::string& text) {
+  std::string out;
+  for (char c : text) {
+    if (c == '"' || c == '\\') out += '\\';
+    out += c;
+  }
+  return out;
+}
+
 std::string Row16(const Eigen::Isometry3d& T) {
   return absl::StrJoin(core::RowMajorEntries(T), " ",
                        [](std::string* out, double v) { absl::StrAppendFormat(out, "%.9g", v); });
@@ -170,7 +179,8 @@ int RunEvalCommand(const std::vector<std::string>& /*args*/) {
     return 2;
   }
   const std::string mode = absl::GetFlag(FLAGS_mode);
-  if (mode != "net" && mode != "net+refine" && mode != "refine") {
+  absl::StatusOr<core::RegistrationMode> parsed_mode = core::ParseRegistrationMode(mode);
+  if (!parsed_mode.ok()) {
     std::fprintf(stderr, "rpsr eval: --mode must be net, net+refine or refine (not %s)\n",
                  mode.c_str());
     return 2;
@@ -187,12 +197,13 @@ int RunEvalCommand(const std::vector<std::string>& /*args*/) {
   core::BarnesHutTreeOptions tree_options;
   tree_options.max_depth = absl::GetFlag(FLAGS_tree_depth);
 
-  absl::StatusOr<std::unique_ptr<core::RpsrNet>> net =
-      core::RpsrNet::Load(absl::GetFlag(FLAGS_model));
-  if (!net.ok()) {
-    std::fprintf(stderr, "rpsr eval: %s\n", std::string(net.status().message()).c_str());
+  absl::StatusOr<std::unique_ptr<core::Registrar>> registrar =
+      core::Registrar::Create(RegistrarConfigFromModelFlag(absl::GetFlag(FLAGS_model)));
+  if (!registrar.ok()) {
+    std::fprintf(stderr, "rpsr eval: %s\n", std::string(registrar.status().message()).c_str());
     return 1;
   }
+  std::fprintf(stderr, "rpsr eval: %s\n", (*registrar)->model_description().c_str());
   core::SetNetThreads(absl::GetFlag(FLAGS_threads));
 
   absl::StatusOr<std::vector<Setting>> settings;
@@ -221,9 +232,11 @@ int RunEvalCommand(const std::vector<std::string>& /*args*/) {
     return 1;
   }
   rows << "setting,source,target,T_target_source,score_peak,time_ms,rotation_error_deg,"
-          "translation_error\n";
+          "translation_error,confidence,valid\n";
   const int batch_size = std::max(1, absl::GetFlag(FLAGS_batch_size));
-  const int passes = absl::GetFlag(FLAGS_passes);
+  core::RegistrationOptions registration;
+  registration.mode = *parsed_mode;
+  registration.passes = absl::GetFlag(FLAGS_passes);
   std::string summary_csv =
       "setting,pairs,rotation_rmse_deg,rotation_mae_deg,"
       "rotation_median_deg,translation_rmse,translation_mae,"
@@ -240,46 +253,36 @@ int RunEvalCommand(const std::vector<std::string>& /*args*/) {
     double total_ms = 0.0;
     for (size_t begin = 0; begin < setting.pairs.size(); begin += batch_size) {
       const size_t end = std::min(setting.pairs.size(), begin + batch_size);
-      std::vector<core::NetPair> batch;
+      std::vector<std::pair<const core::Octree*, const core::Octree*>> batch;
       for (size_t i = begin; i < end; ++i) {
         batch.push_back({&setting.pairs[i].source, &setting.pairs[i].target});
       }
       const auto start = std::chrono::steady_clock::now();
-      absl::StatusOr<std::vector<core::NetEstimate>> estimates =
-          mode == "refine" ? std::vector<core::NetEstimate>(batch.size())
-                           : (*net)->Estimate(batch, passes);
-      if (estimates.ok() && mode != "net") {
-        for (size_t i = 0; i < batch.size(); ++i) {
-          absl::StatusOr<core::TreeRefinementResult> refined = core::RefineOnTrees(
-              *batch[i].source, *batch[i].target, (*estimates)[i].T_target_source);
-          if (!refined.ok()) {
-            estimates = refined.status();
-            break;
-          }
-          (*estimates)[i].T_target_source = refined->T_target_source;
-        }
-      }
+      std::vector<absl::StatusOr<core::RegistrationResult>> results =
+          (*registrar)->RegisterBatch(batch, registration);
       const double ms =
           std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
               .count();
-      if (!estimates.ok()) {
-        std::fprintf(stderr, "rpsr eval: %s\n", std::string(estimates.status().message()).c_str());
-        return 1;
-      }
       total_ms += ms;
       for (size_t i = begin; i < end; ++i) {
         const EvalPair& pair = setting.pairs[i];
-        const core::NetEstimate& estimate = (*estimates)[i - begin];
+        const absl::StatusOr<core::RegistrationResult>& result = results[i - begin];
+        if (!result.ok()) {
+          std::fprintf(stderr, "rpsr eval: %s (%s): %s\n", setting.name.c_str(),
+                       pair.source_name.c_str(), std::string(result.status().message()).c_str());
+          return 1;
+        }
         rows << setting.name << "," << pair.source_name << "," << pair.target_name << ","
-             << Row16(estimate.T_target_source) << "," << estimate.score_peak << ","
+             << Row16(result->T_target_source) << "," << result->net_score_peak << ","
              << ms / batch.size();
         if (pair.truth) {
-          const core::PairError e = core::ErrorOf(estimate.T_target_source, *pair.truth);
+          const core::PairError e = core::ErrorOf(result->T_target_source, *pair.truth);
           errors.push_back(e);
-          rows << "," << e.rotation_deg << "," << e.translation << "\n";
+          rows << "," << e.rotation_deg << "," << e.translation;
         } else {
-          rows << ",,\n";
+          rows << ",,";
         }
+        rows << "," << result->confidence << "," << (result->valid ? 1 : 0) << "\n";
       }
     }
     const core::ErrorSummary s = core::Summarize(errors, thresholds);
@@ -308,8 +311,8 @@ int RunEvalCommand(const std::vector<std::string>& /*args*/) {
   }
   std::ofstream(output + ".summary.csv") << summary_csv;
   std::ofstream(output + ".summary.json")
-      << "{\"model\": \"" << absl::GetFlag(FLAGS_model) << "\", \"mode\": \"" << mode
-      << "\", \"settings\": [\n  " << absl::StrJoin(json_settings, ",\n  ") << "\n]}\n";
+      << "{\"model\": \"" << JsonEscaped((*registrar)->model_description()) << "\", \"mode\": \""
+      << mode << "\", \"settings\": [\n  " << absl::StrJoin(json_settings, ",\n  ") << "\n]}\n";
   std::fprintf(stderr, "rpsr eval: wrote %s, %s.summary.csv and %s.summary.json\n", output.c_str(),
                output.c_str(), output.c_str());
   return 0;

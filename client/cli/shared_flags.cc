@@ -1,8 +1,13 @@
 // Flags read by more than one subcommand (see shared_flags.h).
 #include "client/cli/shared_flags.h"
 
+#include <algorithm>
+#include <filesystem>
+#include <system_error>
+
 #include "absl/flags/flag.h"
 #include "absl/strings/ascii.h"
+#include "core/registrar/embedded_models.h"
 
 ABSL_FLAG(std::string, output, "",
           "the folder written: train: model.rpsrw, last.rpsrw, the state and the log; data: the "
@@ -34,6 +39,9 @@ ABSL_FLAG(int, batch_size, 16, "pairs per forward pass (train: per optimisation 
 ABSL_FLAG(int, passes, 0,
           "network passes (Sec. 3.3); 0: 3 for train, the model's own number for eval");
 ABSL_FLAG(int, threads, 1, "LibTorch intra-op threads");
+ABSL_FLAG(std::string, model, "",
+          "eval, calibrate: a weights file (.rpsrw) or the name of a model embedded in the binary "
+          "(objects; lidar when shipped); default: the embedded object model");
 
 namespace rpsr::client {
 
@@ -54,6 +62,21 @@ std::optional<core::ObjectSplit> ParseObjectSplitFlag(const std::string& name,
   if (lower == "seen") return core::ObjectSplit::kM2Seen;
   if (lower == "unseen") return core::ObjectSplit::kM2Unseen;
   return std::nullopt;
+}
+
+core::RegistrarConfig RegistrarConfigFromModelFlag(const std::string& model) {
+  core::RegistrarConfig config;
+  if (model.empty()) return config;
+  std::error_code ec;
+  const std::vector<std::string> embedded = core::EmbeddedModelNames();
+  const bool is_embedded_name =
+      std::find(embedded.begin(), embedded.end(), model) != embedded.end();
+  if (is_embedded_name && !std::filesystem::exists(model, ec)) {
+    config.model = model;
+  } else {
+    config.model_path = model;
+  }
+  return config;
 }
 
 }  // namespace rpsr::client

@@ -12,6 +12,7 @@
 #include "absl/flags/declare.h"
 #include "core/data/disturbances.h"
 #include "core/data/object_pairs.h"
+#include "core/registrar/registrar.h"
 
 ABSL_DECLARE_FLAG(std::string, output);
 ABSL_DECLARE_FLAG(std::string, protocol);
@@ -24,6 +25,7 @@ ABSL_DECLARE_FLAG(int, level);
 ABSL_DECLARE_FLAG(int, batch_size);
 ABSL_DECLARE_FLAG(int, passes);
 ABSL_DECLARE_FLAG(int, threads);
+ABSL_DECLARE_FLAG(std::string, model);
 
 namespace rpsr::client {
 
@@ -34,6 +36,10 @@ std::optional<core::DisturbanceKind> ParseDisturbanceFlag(const std::string& nam
 // `empty_means`; nullopt for anything else.
 std::optional<core::ObjectSplit> ParseObjectSplitFlag(const std::string& name,
                                                       core::ObjectSplit empty_means);
+
+// --model: a weights file, or the name of an embedded model when no file of that name exists;
+// empty: the default embedded model (the Registrar then loads its shipped calibration too).
+core::RegistrarConfig RegistrarConfigFromModelFlag(const std::string& model);
 
 }  // namespace rpsr::client
 

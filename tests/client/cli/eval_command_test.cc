@@ -71,7 +71,7 @@ TEST_F(EvalCommandTest, ManifestRowsAndSummaryAgree) {
   double sum_sq = 0.0;
   for (size_t i = 1; i < lines.size(); ++i) {
     std::vector<std::string> fields = absl::StrSplit(lines[i], ',');
-    ASSERT_EQ(fields.size(), 8u) << lines[i];
+    ASSERT_EQ(fields.size(), 10u) << lines[i];
     EXPECT_EQ(std::vector<std::string>(absl::StrSplit(fields[3], ' ')).size(), 16u);
     double rotation = 0.0;
     ASSERT_TRUE(absl::SimpleAtod(fields[6], &rotation)) << fields[6];
