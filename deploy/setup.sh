@@ -66,9 +66,11 @@ if [ "$core_only" -eq 1 ]; then cmake_args+=(-DRPSR_CORE_ONLY=ON); fi
 read -r -a extra_cmake_args <<<"${RPSR_CMAKE_ARGS:-}"
 cmake_args+=("${extra_cmake_args[@]}")
 read -r -a build_targets <<<"${RPSR_BUILD_TARGETS:-}"
+# RPSR_BUILD_DIR: another build folder than build/ (deploy/dockerfile_steps.sh uses one).
+build_dir="${RPSR_BUILD_DIR:-$here/build}"
 target_args=()
 if [ ${#build_targets[@]} -gt 0 ]; then target_args=(--target "${build_targets[@]}"); fi
-cmake -S "$here" -B "$here/build" "${cmake_args[@]}"
+cmake -S "$here" -B "$build_dir" "${cmake_args[@]}"
 # Two jobs on this 2-core machine: a LibTorch TU takes ~1.5 GB, so more jobs only thrash.
-cmake --build "$here/build" -j "${RPSR_BUILD_JOBS:-2}" "${target_args[@]}"
+cmake --build "$build_dir" -j "${RPSR_BUILD_JOBS:-2}" "${target_args[@]}"
 echo "setup.sh: done after $(( $(date +%s) - start )) s"
