@@ -70,6 +70,10 @@ ran_setup=0
 for run in "${build_runs[@]}"; do
   if [[ "$run" == *"deploy/setup.sh --deps-only"* ]]; then
     if [ "$deps" -eq 0 ]; then step "skipped (--no-deps): $run"; continue; fi
+    if [ "$(id -u)" -ne 0 ] && ! sudo -n true 2>/dev/null; then
+      step "skipped (needs root or sudo): $run"
+      continue
+    fi
   elif [[ "$run" == *"deploy/setup.sh"* ]]; then
     ran_setup=1
     if [ "$compile" -eq 0 ]; then step "skipped (--no-compile): $run"; continue; fi

@@ -39,7 +39,7 @@ packages=(
   # clang-format checks the style in tests/run.sh.
   clang clang-format libclang-rt-14-dev
   # promtool (Debian's prometheus), docker-compose, yamllint and jq check deploy/ (tests/deploy/).
-  prometheus docker-compose yamllint jq
+  prometheus docker-compose yamllint jq curl
 )
 if [ "$with_peers" -eq 1 ]; then packages+=(libopen3d-dev libpcl-dev); fi
 

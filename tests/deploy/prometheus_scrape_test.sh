@@ -1,0 +1,87 @@
+#!/usr/bin/env bash
+# A real Prometheus (Debian's, deploy/prometheus/prometheus.yml with its alert rules) on
+# 127.0.0.1 scraping a real rpsrd; its HTTP API must show the target up, rpsr metrics with the
+# model loaded, and the alert rules loaded and healthy. Free ports, a temporary folder, both
+# processes ended at exit.
+#   tests/deploy/prometheus_scrape_test.sh RPSRD_BINARY
+set -euo pipefail
+root=$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)
+rpsrd=${1:-}
+if [ -z "$rpsrd" ] || [ ! -x "$rpsrd" ]; then
+  echo "SKIP: rpsrd is not built ('${rpsrd}')"
+  exit 77
+fi
+if ! command -v prometheus >/dev/null; then
+  echo "SKIP: prometheus not installed (Debian package prometheus; deploy/setup.sh installs it)"
+  exit 77
+fi
+for tool in curl jq python3; do
+  command -v "$tool" >/dev/null || { echo "SKIP: $tool not installed"; exit 77; }
+done
+
+work=$(mktemp -d)
+pids=()
+cleanup() {
+  for pid in "${pids[@]}"; do kill "$pid" 2>/dev/null || true; done
+  for pid in "${pids[@]}"; do wait "$pid" 2>/dev/null || true; done
+  rm -rf "$work"
+}
+trap cleanup EXIT
+fail() {
+  echo "FAIL: $*" >&2
+  echo "--- rpsrd log (tail)" >&2; tail -20 "$work/rpsrd.log" >&2 || true
+  echo "--- prometheus log (tail)" >&2; tail -20 "$work/prometheus.log" >&2 || true
+  exit 1
+}
+free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
+grpc_port=$(free_port)
+metrics_port=$(free_port)
+prom_port=$(free_port)
+
+OMP_WAIT_POLICY=PASSIVE "$rpsrd" --address="127.0.0.1:$grpc_port" \
+  --metrics_address="127.0.0.1:$metrics_port" --log_requests=false >"$work/rpsrd.log" 2>&1 &
+pids+=($!)
+
+# The shipped config, pointed at this rpsrd and this Prometheus, scraping every second.
+mkdir -p "$work/config"
+cp "$root/deploy/prometheus/alerts.yml" "$work/config/"
+sed -e "s/\"rpsrd:9464\"/\"127.0.0.1:$metrics_port\"/" -e "s/\"localhost:9090\"/\"127.0.0.1:$prom_port\"/" \
+    -e 's/scrape_interval: 15s/scrape_interval: 1s/' -e 's/evaluation_interval: 15s/evaluation_interval: 1s/' \
+    "$root/deploy/prometheus/prometheus.yml" >"$work/config/prometheus.yml"
+grep -q "127.0.0.1:$metrics_port" "$work/config/prometheus.yml" || fail "could not point prometheus.yml at rpsrd"
+prometheus --config.file="$work/config/prometheus.yml" --storage.tsdb.path="$work/data" \
+  --web.listen-address="127.0.0.1:$prom_port" >"$work/prometheus.log" 2>&1 &
+pids+=($!)
+
+api=http://127.0.0.1:$prom_port/api/v1
+query() { curl -sf --get --data-urlencode "query=$1" "$api/query"; }
+# Up to 90 s: rpsrd loads the model (a few seconds), Prometheus starts and scrapes every second.
+deadline=$((SECONDS + 90))
+until [ "$(query 'rpsr_model_loaded{job="rpsrd"}' 2>/dev/null | jq -r '.data.result[0].value[1] // empty')" = 1 ]; do
+  [ $SECONDS -lt $deadline ] || fail "Prometheus never saw rpsr_model_loaded == 1"
+  for pid in "${pids[@]}"; do kill -0 "$pid" 2>/dev/null || fail "a process exited early"; done
+  sleep 1
+done
+echo "rpsr_model_loaded = 1 after $SECONDS s"
+
+targets=$(curl -sf "$api/targets")
+[ "$(jq -r '.data.activeTargets[] | select(.labels.job == "rpsrd") | .health' <<<"$targets")" = up ] ||
+  fail "the rpsrd target is not up: $(jq -c '.data.activeTargets' <<<"$targets")"
+# Series rpsrd exports before any call: the cache, sessions, evictions by reason, histograms.
+reasons=$(query 'rpsr_cache_evictions_total{job="rpsrd"}' | jq -r '[.data.result[].metric.reason] | sort | join(",")')
+[ "$reasons" = "memory_budget,released,session_closed,session_expired" ] || fail "eviction reasons: '$reasons'"
+for metric in rpsr_cache_bytes rpsr_sessions rpsr_cache_clouds rpsr_queue_depth rpsr_batch_size_count \
+              rpsr_queue_wait_seconds_bucket rpsr_network_seconds_count; do
+  n=$(query "$metric{job=\"rpsrd\"}" | jq '.data.result | length')
+  [ "$n" -ge 1 ] || fail "Prometheus has no $metric from rpsrd"
+done
+# The alert rules load and evaluate against the live series.
+rules=$(curl -sf "$api/rules")
+alerts=$(jq '[.data.groups[].rules[] | select(.type == "alerting")] | length' <<<"$rules")
+bad=$(jq -r '[.data.groups[].rules[] | select(.health != "ok" and .health != "unknown") | .name] | join(",")' <<<"$rules")
+[ "$alerts" -ge 7 ] || fail "only $alerts alerting rules loaded"
+[ -z "$bad" ] || fail "rules in error: $bad"
+# A freshly started, idle rpsrd fires nothing but may be pending on nothing either.
+firing=$(curl -sf "$api/alerts" | jq -r '[.data.alerts[] | select(.state == "firing") | .labels.alertname] | join(",")')
+[ -z "$firing" ] || fail "alerts firing on an idle rpsrd: $firing"
+echo "PASS: Prometheus scraped rpsrd ($alerts alert rules loaded, target up, rpsr series present)"
