@@ -101,6 +101,9 @@ class RunningServer {
   void Wait();
   // Whether the model is loaded (health SERVING, unless draining).
   bool ready() const;
+  // Blocks until the model is loaded (OK) or its load failed (the error); at once when
+  // StartServer waited for the model.
+  absl::Status WaitForModel();
 
  private:
   friend absl::StatusOr<std::unique_ptr<RunningServer>> StartServer(const ServerOptions& options);

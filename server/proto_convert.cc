@@ -1,0 +1,145 @@
+#include "server/proto_convert.h"
+
+#include <cmath>
+#include <string>
+
+#include "absl/strings/str_cat.h"
+
+namespace rpsr::server {
+
+absl::StatusOr<Eigen::Isometry3d> TransformFromProto(const v1::RigidTransform& proto,
+                                                     absl::string_view what) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  if (proto.rotation_size() > 0) {
+    if (proto.rotation_size() != 9) {
+      return absl::InvalidArgumentError(absl::StrCat(what, ".rotation has ", proto.rotation_size(),
+                                                     " numbers; 9 (3x3 row-major) expected"));
+    }
+    Eigen::Matrix3d R;
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) R(r, c) = proto.rotation(3 * r + c);
+    }
+    if (!R.allFinite()) {
+      return absl::InvalidArgumentError(absl::StrCat(what, ".rotation is not finite"));
+    }
+    const double orthogonality = (R.transpose() * R - Eigen::Matrix3d::Identity()).norm();
+    if (orthogonality > 1e-3 || std::abs(R.determinant() - 1.0) > 1e-3) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(what, ".rotation is not a rotation (|R^T R - I| = ", orthogonality,
+                       ", det = ", R.determinant(), "); give an orthonormal matrix with det +1"));
+    }
+    // Re-orthonormalise so the small slack allowed above does not reach the registrar.
+    T.linear() = Eigen::Quaterniond(R).normalized().toRotationMatrix();
+  } else if (proto.has_quaternion()) {
+    const Eigen::Quaterniond q(proto.quaternion().w(), proto.quaternion().x(),
+                               proto.quaternion().y(), proto.quaternion().z());
+    if (!q.coeffs().allFinite() || q.norm() < 1e-9) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(what, ".quaternion must be finite and non-zero"));
+    }
+    T.linear() = q.normalized().toRotationMatrix();
+  }
+  if (proto.translation_size() != 0 && proto.translation_size() != 3) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(what, ".translation has ", proto.translation_size(), " numbers; 3 expected"));
+  }
+  if (proto.translation_size() == 3) {
+    const Eigen::Vector3d t(proto.translation(0), proto.translation(1), proto.translation(2));
+    if (!t.allFinite()) {
+      return absl::InvalidArgumentError(absl::StrCat(what, ".translation is not finite"));
+    }
+    T.translation() = t;
+  }
+  return T;
+}
+
+void TransformToProto(const Eigen::Isometry3d& T, v1::RigidTransform* proto) {
+  proto->clear_rotation();
+  proto->clear_translation();
+  const Eigen::Matrix3d R = T.rotation();
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) proto->add_rotation(R(r, c));
+  }
+  Eigen::Quaterniond q(R);
+  q.normalize();
+  if (q.w() < 0) q.coeffs() *= -1.0;  // one canonical sign
+  proto->mutable_quaternion()->set_w(q.w());
+  proto->mutable_quaternion()->set_x(q.x());
+  proto->mutable_quaternion()->set_y(q.y());
+  proto->mutable_quaternion()->set_z(q.z());
+  for (int a = 0; a < 3; ++a) proto->add_translation(T.translation()[a]);
+}
+
+absl::StatusOr<core::RegistrationOptions> OptionsFromProto(const v1::RegisterOptions& proto) {
+  core::RegistrationOptions options;
+  if (!proto.mode().empty()) {
+    absl::StatusOr<core::RegistrationMode> mode = core::ParseRegistrationMode(proto.mode());
+    if (!mode.ok()) return mode.status();
+    options.mode = *mode;
+  }
+  if (proto.passes() < 0 || proto.passes() > kMaxPasses) {
+    return absl::InvalidArgumentError(absl::StrCat("options.passes is ", proto.passes(),
+                                                   "; 0 (the model's default) to ", kMaxPasses,
+                                                   " expected"));
+  }
+  options.passes = proto.passes();
+  if (proto.has_initial_guess()) {
+    absl::StatusOr<Eigen::Isometry3d> guess =
+        TransformFromProto(proto.initial_guess(), "options.initial_guess");
+    if (!guess.ok()) return guess.status();
+    options.initial_T_target_source = *guess;
+  }
+  if (!std::isfinite(proto.deadline_seconds()) || proto.deadline_seconds() < 0) {
+    return absl::InvalidArgumentError(absl::StrCat("options.deadline_seconds is ",
+                                                   proto.deadline_seconds(),
+                                                   "; a finite number >= 0 expected"));
+  }
+  return options;
+}
+
+void ResultToProto(const core::RegistrationResult& result, v1::RegistrationResult* proto) {
+  TransformToProto(result.T_target_source, proto->mutable_transform_target_source());
+  proto->set_valid(result.valid);
+  proto->set_failure_reason(result.failure_reason);
+  proto->set_confidence(result.confidence);
+  proto->set_fitness(result.fitness);
+  proto->set_inlier_rmse(result.inlier_rmse);
+  proto->set_iterations(result.iterations);
+  proto->set_converged(result.converged);
+  proto->clear_information();
+  for (int r = 0; r < 6; ++r) {
+    for (int c = 0; c < 6; ++c) proto->add_information(result.information(r, c));
+  }
+  proto->clear_degenerate_axes();
+  for (bool axis : result.degenerate_axes) proto->add_degenerate_axes(axis);
+  proto->set_num_degenerate(result.num_degenerate);
+  TransformToProto(result.net_T_target_source, proto->mutable_net_transform_target_source());
+  proto->set_net_score_peak(result.net_score_peak);
+  proto->set_mode(std::string(core::RegistrationModeName(result.mode)));
+  v1::Timings* timings = proto->mutable_timings();
+  timings->set_net_seconds(result.timings.net_seconds);
+  timings->set_refine_seconds(result.timings.refine_seconds);
+  timings->set_confidence_seconds(result.timings.confidence_seconds);
+  timings->set_registrar_seconds(result.timings.total_seconds);
+}
+
+void TreeStatsToProto(const core::Octree& tree, double build_seconds, v1::TreeStats* proto) {
+  proto->set_num_points(tree.num_points());
+  proto->set_max_depth(tree.max_depth());
+  proto->clear_nodes_per_depth();
+  for (const core::Octree::Level& level : tree.levels()) {
+    proto->add_nodes_per_depth(static_cast<uint32_t>(level.size()));
+  }
+  proto->set_memory_bytes(tree.MemoryBytes());
+  proto->clear_cube_center();
+  for (int a = 0; a < 3; ++a) proto->add_cube_center(tree.center()[a]);
+  proto->set_cube_half_length(tree.half_length());
+  proto->set_build_seconds(build_seconds);
+}
+
+grpc::Status ToGrpcStatus(const absl::Status& status) {
+  if (status.ok()) return grpc::Status::OK;
+  return grpc::Status(static_cast<grpc::StatusCode>(status.code()), std::string(status.message()));
+}
+
+}  // namespace rpsr::server
