@@ -26,6 +26,10 @@ const std::map<std::string, Subcommand>& Subcommands() {
       {"eval",
        {"run the network on pairs (a manifest or the object protocol) and report its errors",
         rpsr::client::RunEvalCommand}},
+      {"calibrate",
+       {"fit the confidence on seeded validation pairs (objects and LiDAR) or measure it "
+        "(--evaluate)",
+        rpsr::client::RunCalibrateCommand}},
       {"train",
        {"train RPSRNet end to end on a seeded pair protocol (objects or LiDAR)",
         rpsr::client::RunTrainCommand}},

@@ -8,6 +8,7 @@
 
 namespace rpsr::client {
 
+int RunCalibrateCommand(const std::vector<std::string>& args);
 int RunDataCommand(const std::vector<std::string>& args);
 int RunEvalCommand(const std::vector<std::string>& args);
 int RunTrainCommand(const std::vector<std::string>& args);

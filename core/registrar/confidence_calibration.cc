@@ -1,0 +1,363 @@
+#include "core/registrar/confidence_calibration.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <limits>
+#include <mutex>
+#include <numeric>
+#include <thread>
+#include <utility>
+
+#include "Eigen/Cholesky"
+#include "Eigen/Core"
+#include "absl/status/status.h"
+#include "absl/strings/str_cat.h"
+#include "core/data/disturbances.h"
+#include "core/data/registration_metrics.h"
+#include "core/data/training_pairs.h"
+#include "core/synth/seeded_random.h"
+
+namespace rpsr::core {
+namespace {
+
+const char* SplitName(ObjectSplit split) {
+  switch (split) {
+    case ObjectSplit::kM1All:
+      return "m1";
+    case ObjectSplit::kM2Seen:
+      return "seen";
+    case ObjectSplit::kM2Unseen:
+      return "unseen";
+  }
+  return "?";
+}
+
+// One pair to generate: an object pair (split, disturbance, level, index) or a LiDAR pair (frame
+// offset, index).
+struct WorkItem {
+  bool lidar = false;
+  std::string setting;
+  uint64_t seed = 0;
+  PairOptions object;
+  int offset_slot = 0;
+  uint64_t lidar_index = 0;
+};
+
+double Sigmoid(double z) {
+  if (z >= 0) return 1.0 / (1.0 + std::exp(-z));
+  const double e = std::exp(z);
+  return e / (1.0 + e);
+}
+
+}  // namespace
+
+bool CalibrationSample::success() const {
+  return rotation_error_deg <= 1.0 && translation_error_rel <= 0.01;
+}
+
+bool CalibrationSample::failure() const {
+  return rotation_error_deg > 5.0 || translation_error_rel > 0.05;
+}
+
+absl::StatusOr<std::vector<CalibrationSample>> CollectCalibrationSamples(
+    const Registrar& registrar, const CalibrationSetOptions& options) {
+  if (options.modes.empty()) return absl::InvalidArgumentError("no registration mode to sample");
+  std::vector<WorkItem> items;
+  std::vector<std::pair<DisturbanceKind, int>> settings = {{DisturbanceKind::kNone, 0}};
+  for (DisturbanceKind kind : {DisturbanceKind::kGaussianNoise, DisturbanceKind::kUniformOutliers,
+                               DisturbanceKind::kCrop, DisturbanceKind::kJitter}) {
+    for (int level = 0; level < kNumDisturbanceLevels; ++level) settings.push_back({kind, level});
+  }
+  for (ObjectSplit split : options.object_splits) {
+    for (size_t k = 0; k < settings.size(); ++k) {
+      const auto [kind, level] = settings[k];
+      absl::StatusOr<double> magnitude = DisturbanceMagnitudeAtLevel(kind, level);
+      if (!magnitude.ok()) return magnitude.status();
+      const std::string name = absl::StrCat(
+          SplitName(split), "/",
+          kind == DisturbanceKind::kNone ? std::string("clean")
+                                         : absl::StrCat(DisturbanceName(kind), "@", *magnitude));
+      const uint64_t setting_seed =
+          DeriveSeed(options.seed, static_cast<uint64_t>(split) * 64 + static_cast<uint64_t>(k));
+      for (int i = 0; i < options.object_pairs_per_setting; ++i) {
+        WorkItem item;
+        item.setting = name;
+        item.seed = DeriveSeed(setting_seed, static_cast<uint64_t>(i));
+        item.object.split = split;
+        item.object.num_points = i % 2 == 0 ? 1024 : 2048;
+        item.object.disturbance = kind;
+        item.object.disturbance_level = level;
+        items.push_back(item);
+      }
+    }
+  }
+  std::vector<RegistrationPairGenerator> lidar_streams;
+  for (size_t o = 0; o < options.lidar_frame_offsets.size(); ++o) {
+    LidarStreamOptions stream;
+    stream.frame_offset = options.lidar_frame_offsets[o];
+    stream.pairs_per_sequence = 8;  // four sequences (one per street style) per 32 pairs
+    stream.stream_seed =
+        DeriveSeed(options.seed, 1000 + static_cast<uint64_t>(stream.frame_offset));
+    lidar_streams.push_back(MakeLidarPairStream(stream));
+    for (int i = 0; i < options.lidar_pairs_per_offset; ++i) {
+      WorkItem item;
+      item.lidar = true;
+      item.setting = absl::StrCat("lidar+", stream.frame_offset);
+      item.offset_slot = static_cast<int>(o);
+      item.lidar_index = static_cast<uint64_t>(i);
+      items.push_back(item);
+    }
+  }
+
+  std::vector<std::vector<CalibrationSample>> per_item(items.size());
+  std::vector<absl::Status> errors(items.size());
+  std::atomic<size_t> next{0};
+  std::atomic<int> done{0};
+  std::mutex progress_mutex;
+  auto work = [&] {
+    for (size_t i = next++; i < items.size(); i = next++) {
+      const WorkItem& item = items[i];
+      RegistrationPair pair;
+      BarnesHutTreeOptions tree_options;
+      if (item.lidar) {
+        absl::StatusOr<RegistrationPair> p = lidar_streams[item.offset_slot](item.lidar_index);
+        if (!p.ok()) {
+          errors[i] = p.status();
+          continue;
+        }
+        pair = *std::move(p);
+        tree_options.max_depth = options.lidar_tree_depth;
+      } else {
+        absl::StatusOr<ObjectPair> p = MakeObjectPair(item.object, item.seed);
+        if (!p.ok()) {
+          errors[i] = p.status();
+          continue;
+        }
+        pair = {std::move(p->source), std::move(p->target), p->T_target_source};
+        tree_options.max_depth = options.object_tree_depth;
+      }
+      absl::StatusOr<Octree> source = BuildOctree(pair.source, tree_options);
+      absl::StatusOr<Octree> target = BuildOctree(pair.target, tree_options);
+      if (!source.ok() || !target.ok()) {
+        errors[i] = source.ok() ? target.status() : source.status();
+        continue;
+      }
+      std::vector<RegistrationRequest> requests;
+      for (RegistrationMode mode : options.modes) {
+        RegistrationRequest r{&*source, &*target, {}};
+        r.options.mode = mode;
+        requests.push_back(r);
+      }
+      std::vector<absl::StatusOr<RegistrationResult>> results = registrar.RegisterBatch(requests);
+      const double extent = std::max(ConfidenceExtent(*target), 1e-12);
+      for (size_t m = 0; m < results.size(); ++m) {
+        if (!results[m].ok()) {
+          errors[i] = results[m].status();
+          break;
+        }
+        const RegistrationResult& r = *results[m];
+        CalibrationSample s;
+        s.protocol = item.lidar ? "lidar" : "objects";
+        s.setting = item.setting;
+        s.mode = r.mode;
+        s.valid = r.valid;
+        s.num_degenerate = r.num_degenerate;
+        s.failure_reason = r.failure_reason;
+        s.confidence = r.confidence;
+        s.features = r.confidence_features;
+        if (s.features.empty()) s.features.assign(kNumConfidenceFeatures, 0.0);
+        const PairError e = ErrorOf(r.T_target_source, pair.T_target_source);
+        s.rotation_error_deg = e.rotation_deg;
+        s.translation_error_rel = e.translation / extent;
+        per_item[i].push_back(std::move(s));
+      }
+      const int d = ++done;
+      if (options.progress) {
+        std::lock_guard<std::mutex> lock(progress_mutex);
+        options.progress(d, static_cast<int>(items.size()));
+      }
+    }
+  };
+  std::vector<std::thread> threads;
+  for (int t = 1; t < std::max(1, options.threads); ++t) threads.emplace_back(work);
+  work();
+  for (std::thread& t : threads) t.join();
+  std::vector<CalibrationSample> samples;
+  for (size_t i = 0; i < items.size(); ++i) {
+    if (!errors[i].ok()) {
+      return absl::Status(errors[i].code(),
+                          absl::StrCat(items[i].setting, ": ", errors[i].message()));
+    }
+    for (CalibrationSample& s : per_item[i]) samples.push_back(std::move(s));
+  }
+  return samples;
+}
+
+absl::StatusOr<ConfidenceModel> FitConfidenceModel(const std::vector<CalibrationSample>& samples,
+                                                   const ConfidenceFitOptions& options) {
+  std::vector<const CalibrationSample*> used;
+  int positives = 0;
+  for (const CalibrationSample& s : samples) {
+    if (!s.valid || s.features.size() != static_cast<size_t>(kNumConfidenceFeatures)) continue;
+    used.push_back(&s);
+    positives += s.success();
+  }
+  const int n = static_cast<int>(used.size());
+  if (positives == 0 || positives == n) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("fitting the confidence needs valid samples of both outcomes (", n, " valid, ",
+                     positives, " within 1 degree and 1% of the extent)"));
+  }
+  const int d = kNumConfidenceFeatures;
+  // Standardise; constant features (e.g. one mode only) are left out.
+  Eigen::VectorXd mean = Eigen::VectorXd::Zero(d), scale = Eigen::VectorXd::Ones(d);
+  for (const CalibrationSample* s : used) {
+    for (int j = 0; j < d; ++j) mean[j] += s->features[j];
+  }
+  mean /= n;
+  Eigen::VectorXd var = Eigen::VectorXd::Zero(d);
+  for (const CalibrationSample* s : used) {
+    for (int j = 0; j < d; ++j) var[j] += std::pow(s->features[j] - mean[j], 2);
+  }
+  std::vector<int> active;
+  for (int j = 0; j < d; ++j) {
+    scale[j] = std::sqrt(var[j] / n);
+    if (scale[j] > 1e-9) active.push_back(j);
+  }
+  const int k = static_cast<int>(active.size()) + 1;  // + bias
+  Eigen::MatrixXd X(n, k);
+  Eigen::VectorXd y(n);
+  for (int i = 0; i < n; ++i) {
+    X(i, 0) = 1.0;
+    for (int a = 0; a < k - 1; ++a) {
+      const int j = active[a];
+      X(i, a + 1) = (used[i]->features[j] - mean[j]) / scale[j];
+    }
+    y[i] = used[i]->success() ? 1.0 : 0.0;
+  }
+  Eigen::VectorXd w = Eigen::VectorXd::Zero(k);
+  const double lambda = options.l2 * n;
+  for (int it = 0; it < options.max_newton_iterations; ++it) {
+    Eigen::VectorXd p(n);
+    for (int i = 0; i < n; ++i) p[i] = Sigmoid(X.row(i).dot(w));
+    Eigen::VectorXd g = X.transpose() * (p - y);
+    Eigen::MatrixXd H = Eigen::MatrixXd::Zero(k, k);
+    for (int i = 0; i < n; ++i) {
+      H.noalias() += std::max(p[i] * (1 - p[i]), 1e-12) * X.row(i).transpose() * X.row(i);
+    }
+    for (int a = 1; a < k; ++a) {  // the bias is not penalised
+      g[a] += lambda * w[a];
+      H(a, a) += lambda;
+    }
+    const Eigen::VectorXd step = H.ldlt().solve(g);
+    if (!step.allFinite()) break;
+    w -= step;
+    if (step.norm() < 1e-9 * (1 + w.norm())) break;
+  }
+  ConfidenceModel model;
+  model.bias = w[0];
+  for (int a = 0; a < k - 1; ++a) {
+    const int j = active[a];
+    model.features.push_back({j, mean[j], scale[j], w[a + 1]});
+  }
+  model.degenerate_cap = options.degenerate_cap;
+  if (options.isotonic) {
+    // Pool adjacent violators on (raw probability, outcome), sorted by probability.
+    std::vector<std::pair<double, double>> points;
+    for (const CalibrationSample* s : used) {
+      points.push_back({model.RawProbability(s->features), s->success() ? 1.0 : 0.0});
+    }
+    std::sort(points.begin(), points.end());
+    struct Block {
+      double x_sum, y_sum, count;
+    };
+    std::vector<Block> blocks;
+    for (const auto& [x, yv] : points) {
+      blocks.push_back({x, yv, 1.0});
+      while (blocks.size() >= 2 &&
+             blocks[blocks.size() - 2].y_sum / blocks[blocks.size() - 2].count >=
+                 blocks.back().y_sum / blocks.back().count) {
+        Block b = blocks.back();
+        blocks.pop_back();
+        blocks.back().x_sum += b.x_sum;
+        blocks.back().y_sum += b.y_sum;
+        blocks.back().count += b.count;
+      }
+    }
+    for (const Block& b : blocks) {
+      model.isotonic_x.push_back(b.x_sum / b.count);
+      model.isotonic_y.push_back(b.y_sum / b.count);
+    }
+    if (model.isotonic_x.size() < 2) {
+      model.isotonic_x.clear();
+      model.isotonic_y.clear();
+    }
+  }
+  return model;
+}
+
+ReliabilityReport MeasureReliability(const std::vector<CalibrationSample>& samples,
+                                     const std::vector<double>& confidences, int num_bins) {
+  ReliabilityReport report;
+  report.count = static_cast<int>(samples.size());
+  num_bins = std::max(1, num_bins);
+  report.bins.resize(num_bins);
+  for (int b = 0; b < num_bins; ++b) {
+    report.bins[b].lower = static_cast<double>(b) / num_bins;
+    report.bins[b].upper = static_cast<double>(b + 1) / num_bins;
+  }
+  std::vector<double> success_scores, failure_scores;
+  for (size_t i = 0; i < samples.size(); ++i) {
+    const double c = std::clamp(confidences[i], 0.0, 1.0);
+    const double y = samples[i].success() ? 1.0 : 0.0;
+    report.successes += samples[i].success();
+    report.failures += samples[i].failure();
+    report.mean_confidence += c;
+    report.success_rate += y;
+    report.brier += (c - y) * (c - y);
+    const int b = std::min(num_bins - 1, static_cast<int>(c * num_bins));
+    ReliabilityBin& bin = report.bins[b];
+    ++bin.count;
+    bin.mean_confidence += c;
+    bin.success_rate += y;
+    if (samples[i].success()) success_scores.push_back(c);
+    if (samples[i].failure()) failure_scores.push_back(c);
+  }
+  if (report.count == 0) return report;
+  report.mean_confidence /= report.count;
+  report.success_rate /= report.count;
+  report.brier /= report.count;
+  for (ReliabilityBin& bin : report.bins) {
+    if (bin.count == 0) continue;
+    bin.mean_confidence /= bin.count;
+    bin.success_rate /= bin.count;
+    report.ece += static_cast<double>(bin.count) / report.count *
+                  std::abs(bin.success_rate - bin.mean_confidence);
+  }
+  if (success_scores.empty() || failure_scores.empty()) {
+    report.auroc = std::numeric_limits<double>::quiet_NaN();
+  } else {
+    // Mann-Whitney U through ranks of the merged scores (ties get their mean rank).
+    std::vector<std::pair<double, int>> all;
+    for (double s : success_scores) all.push_back({s, 1});
+    for (double s : failure_scores) all.push_back({s, 0});
+    std::sort(all.begin(), all.end());
+    double rank_sum = 0.0;
+    for (size_t i = 0; i < all.size();) {
+      size_t j = i;
+      while (j < all.size() && all[j].first == all[i].first) ++j;
+      const double mean_rank = 0.5 * static_cast<double>(i + 1 + j);  // ranks i+1 .. j
+      for (size_t t = i; t < j; ++t) {
+        if (all[t].second == 1) rank_sum += mean_rank;
+      }
+      i = j;
+    }
+    const double ns = static_cast<double>(success_scores.size());
+    const double nf = static_cast<double>(failure_scores.size());
+    report.auroc = (rank_sum - ns * (ns + 1) / 2.0) / (ns * nf);
+  }
+  return report;
+}
+
+}  // namespace rpsr::core
