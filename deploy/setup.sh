@@ -38,8 +38,9 @@ packages=(
   # clang + its sanitizer/libFuzzer runtime build the PLY and PCD fuzzers (tests/fuzz/);
   # clang-format checks the style in tests/run.sh.
   clang clang-format libclang-rt-14-dev
-  # promtool (Debian's prometheus), docker-compose, yamllint and jq check deploy/ (tests/deploy/).
-  prometheus docker-compose yamllint jq curl
+  # promtool (Debian's prometheus), docker-compose, yamllint and jq check deploy/ (tests/deploy/);
+  # python3-grpcio runs the container image's health probe (deploy/docker/grpc_health_check.py).
+  prometheus docker-compose yamllint jq curl python3-grpcio
 )
 if [ "$with_peers" -eq 1 ]; then packages+=(libopen3d-dev libpcl-dev); fi
 

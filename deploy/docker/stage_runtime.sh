@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Stages what the runtime image holds, from a build folder, into DEST (deploy/Dockerfile's build
 # stage runs it; deploy/dockerfile_steps.sh runs it here):
-#   DEST/usr/local/bin/{rpsrd,rpsr}
+#   DEST/usr/local/bin/{rpsrd,rpsr,grpc_health_check}
 #   DEST/usr/local/share/rpsr/models/<name>/   the shipped models (also embedded in the binaries)
 #   DEST/usr/local/share/rpsr/runtime-packages.txt
 #       the Debian packages that own the shared libraries the binaries link directly; the
@@ -30,6 +30,8 @@ mkdir -p "$dest/usr/local/bin" "$dest/usr/local/share/rpsr/models"
 for b in "${binaries[@]}"; do
   install -m 0755 "$b" "$dest/usr/local/bin/"
 done
+# The HEALTHCHECK's probe (grpc.health.v1 with python3-grpcio).
+install -m 0755 "$here/deploy/docker/grpc_health_check.py" "$dest/usr/local/bin/grpc_health_check"
 # Weights, confidence calibration and training record of each shipped model; not the
 # optimizer's state or the training checkpoints.
 for model in "$here"/core/models/*/; do
@@ -83,7 +85,7 @@ for needed in "${!candidates_of[@]}"; do
 done
 # libblas.so.3 resolves to whichever BLAS the alternatives chose; the image must get OpenBLAS
 # (with the reference BLAS LibTorch's GEMMs run ~14x slower: ../shared DEPS).
-packages+=(libopenblas0-openmp ca-certificates)
+packages+=(libopenblas0-openmp ca-certificates python3-grpcio)
 printf '%s\n' "${packages[@]}" | sort -u >"$dest/usr/local/share/rpsr/runtime-packages.txt"
 echo "stage_runtime.sh: staged $(ls "$dest/usr/local/bin" | wc -l) binaries," \
      "$(ls "$dest/usr/local/share/rpsr/models" | wc -l) model(s)," \
