@@ -60,6 +60,7 @@ absl::Status ValidateOptions(const ServerOptions& o) {
         "need 5 <= min_tree_max_depth <= default_tree_max_depth <= max_tree_max_depth <= 21 (the "
         "network reads depth 5)");
   }
+  if (o.drain_notice < absl::ZeroDuration()) return invalid("drain_notice is negative");
   if (o.tls_cert_file.empty() != o.tls_key_file.empty()) {
     return invalid("give both tls_cert_file and tls_key_file, or neither");
   }
@@ -206,6 +207,7 @@ class ServerState {
     if (service_ != nullptr) service_->StartDraining();
     if (server_ != nullptr) {
       SetServing(false);
+      if (options_.drain_notice > absl::ZeroDuration()) absl::SleepFor(options_.drain_notice);
       // Waits for calls in flight (their registrations still run on the batcher) up to the grace,
       // then cancels the rest.
       server_->Shutdown(absl::ToChronoTime(absl::Now() + grace));

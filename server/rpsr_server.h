@@ -74,6 +74,11 @@ struct ServerOptions {
   // A session is bound to the token that created it.
   std::vector<std::string> auth_tokens;
 
+  // On Shutdown: how long health says NOT_SERVING and new calls are answered UNAVAILABLE before
+  // gRPC stops accepting connections, so that load balancers watching health move traffic away
+  // first (calls in flight go on throughout). 0: stop accepting at once.
+  absl::Duration drain_notice = absl::ZeroDuration();
+
   bool enable_reflection = true;
   // Structured logs (key=value lines on stderr) of each call; off in tests.
   bool log_requests = true;

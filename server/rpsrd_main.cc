@@ -73,6 +73,9 @@ ABSL_FLAG(std::string, auth_tokens_file, "",
           "File of accepted bearer tokens, one a line ('#' comments); empty: no authentication");
 ABSL_FLAG(absl::Duration, shutdown_grace, absl::Seconds(30),
           "On SIGTERM, how long calls in flight may take before they are cancelled");
+ABSL_FLAG(absl::Duration, drain_notice, absl::ZeroDuration(),
+          "On SIGTERM, how long health says NOT_SERVING (new calls UNAVAILABLE) before the server "
+          "stops accepting connections");
 ABSL_FLAG(bool, reflection, true, "Serve gRPC server reflection");
 ABSL_FLAG(bool, log_requests, true, "One log line per call");
 
@@ -134,6 +137,7 @@ int main(int argc, char** argv) {
   options.max_tree_max_depth = absl::GetFlag(FLAGS_max_tree_depth);
   options.tls_cert_file = absl::GetFlag(FLAGS_tls_cert);
   options.tls_key_file = absl::GetFlag(FLAGS_tls_key);
+  options.drain_notice = absl::GetFlag(FLAGS_drain_notice);
   options.enable_reflection = absl::GetFlag(FLAGS_reflection);
   options.log_requests = absl::GetFlag(FLAGS_log_requests);
   if (const std::string path = absl::GetFlag(FLAGS_auth_tokens_file); !path.empty()) {

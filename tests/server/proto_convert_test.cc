@@ -1,0 +1,105 @@
+#include "server/proto_convert.h"
+
+#include <cmath>
+
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "server/structured_log.h"
+
+namespace rpsr::server {
+namespace {
+
+using ::testing::HasSubstr;
+
+TEST(ProtoConvertTest, TransformsRoundTripThroughMatrixAndQuaternion) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  T.translation() = Eigen::Vector3d(0.1, -2.0, 30.0);
+  v1::RigidTransform proto;
+  TransformToProto(T, &proto);
+  ASSERT_EQ(proto.rotation_size(), 9);
+  EXPECT_GE(proto.quaternion().w(), 0.0);
+  auto back = TransformFromProto(proto, "t");
+  ASSERT_TRUE(back.ok());
+  EXPECT_TRUE(back->isApprox(T, 1e-12));
+  proto.clear_rotation();  // the quaternion alone
+  back = TransformFromProto(proto, "t");
+  ASSERT_TRUE(back.ok());
+  EXPECT_TRUE(back->isApprox(T, 1e-12));
+}
+
+TEST(ProtoConvertTest, RefusesNonRigidOrMalformedTransforms) {
+  v1::RigidTransform proto;
+  for (double v : {1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -1.0}) proto.add_rotation(v);
+  EXPECT_THAT(TransformFromProto(proto, "guess").status().message(),
+              HasSubstr("guess.rotation is not a rotation"));
+  proto.clear_rotation();
+  proto.add_rotation(1.0);
+  EXPECT_THAT(TransformFromProto(proto, "guess").status().message(), HasSubstr("9 (3x3"));
+  proto.clear_rotation();
+  proto.mutable_quaternion();  // all zero
+  EXPECT_THAT(TransformFromProto(proto, "guess").status().message(), HasSubstr("non-zero"));
+  v1::RigidTransform t;
+  t.add_translation(1.0);
+  EXPECT_THAT(TransformFromProto(t, "guess").status().message(), HasSubstr("3 expected"));
+  t.add_translation(NAN);
+  t.add_translation(1.0);
+  EXPECT_THAT(TransformFromProto(t, "guess").status().message(), HasSubstr("not finite"));
+}
+
+TEST(ProtoConvertTest, OptionsDefaultToNetRefineAndCheckRanges) {
+  auto options = OptionsFromProto({});
+  ASSERT_TRUE(options.ok());
+  EXPECT_EQ(options->mode, core::RegistrationMode::kNetRefine);
+  EXPECT_FALSE(options->initial_T_target_source.has_value());
+  v1::RegisterOptions proto;
+  proto.set_mode("net");
+  proto.set_passes(4);
+  options = OptionsFromProto(proto);
+  ASSERT_TRUE(options.ok());
+  EXPECT_EQ(options->mode, core::RegistrationMode::kNet);
+  EXPECT_EQ(options->passes, 4);
+  proto.set_deadline_seconds(-1);
+  EXPECT_EQ(OptionsFromProto(proto).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+TEST(ProtoConvertTest, ResultCarriesEverythingTheRegistrarSays) {
+  core::RegistrationResult result;
+  result.valid = false;
+  result.failure_reason = "degenerate: translation x";
+  result.information(3, 4) = 7.0;
+  result.degenerate_axes[3] = true;
+  result.num_degenerate = 1;
+  result.mode = core::RegistrationMode::kRefine;
+  result.timings.refine_seconds = 0.004;
+  v1::RegistrationResult proto;
+  ResultToProto(result, &proto);
+  EXPECT_FALSE(proto.valid());
+  EXPECT_EQ(proto.failure_reason(), "degenerate: translation x");
+  ASSERT_EQ(proto.information_size(), 36);
+  EXPECT_EQ(proto.information(3 * 6 + 4), 7.0);
+  ASSERT_EQ(proto.degenerate_axes_size(), 6);
+  EXPECT_TRUE(proto.degenerate_axes(3));
+  EXPECT_EQ(proto.mode(), "refine");
+  EXPECT_EQ(proto.timings().refine_seconds(), 0.004);
+}
+
+TEST(ProtoConvertTest, StatusCodesAndMessagesPassThrough) {
+  const grpc::Status status = ToGrpcStatus(absl::NotFoundError("cloud 7 is gone"));
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(status.error_message(), "cloud 7 is gone");
+  EXPECT_TRUE(ToGrpcStatus(absl::OkStatus()).ok());
+}
+
+TEST(StructuredLogTest, WritesKeyValuePairsQuotingWhereNeeded) {
+  const std::string line = FormatLogLine(
+      "warn", "call", {{"method", "Register"}, {"error", "cloud 7 \"x\" gone"}, {"empty", ""}});
+  EXPECT_THAT(line, ::testing::StartsWith("ts="));
+  EXPECT_THAT(
+      line,
+      HasSubstr(
+          " level=warn event=call method=Register error=\"cloud 7 \\\"x\\\" gone\" empty=\"\""));
+}
+
+}  // namespace
+}  // namespace rpsr::server
