@@ -206,11 +206,12 @@ if (!rpsrd || !hpa || !flagsMap || !find("PodDisruptionBudget", "rpsrd")) {
   const cacheAlert = alerts.groups.flatMap((g) => g.rules).find((r) => r.alert === "RpsrCacheMemoryHigh");
   const threshold = cacheAlert?.expr.match(/rpsr_cache_bytes > 0\.9 \* (\d+)/);
   check(threshold && Number(threshold[1]) === budget, `RpsrCacheMemoryHigh's budget (${threshold?.[1]}) is not --cache_memory_bytes (${budget})`);
-  // Drain: preStop + --shutdown_grace within the pod's grace period.
-  const seconds = (d) => { const m = String(d).match(/^(\d+)s$/); return m ? Number(m[1]) : NaN; };
+  // Drain: preStop + --drain_notice + --shutdown_grace within the pod's grace period.
+  const seconds = (d) => { const m = String(d ?? "0s").match(/^(\d+)s$/); return m ? Number(m[1]) : NaN; };
   const preStop = Number(c.lifecycle?.preStop?.exec?.command?.[1] ?? 0);
-  check(preStop + seconds(flags.get("shutdown_grace")) < rpsrd.spec.template.spec.terminationGracePeriodSeconds,
-        "preStop + --shutdown_grace does not fit terminationGracePeriodSeconds: a drain would be killed");
+  const drain = preStop + seconds(flags.get("drain_notice")) + seconds(flags.get("shutdown_grace"));
+  check(drain < rpsrd.spec.template.spec.terminationGracePeriodSeconds,
+        `preStop + --drain_notice + --shutdown_grace (${drain} s) does not fit terminationGracePeriodSeconds: a drain would be killed`);
   // Envoy's ring hash reaches the headless Service on the grpc port.
   const envoy = YAML.parse(fs.readFileSync(path.join(root, "deploy/envoy/envoy.yaml"), "utf8"));
   const cluster = envoy.static_resources.clusters.find((x) => x.name === "rpsrd");
