@@ -63,6 +63,9 @@ ABSL_FLAG(int, frames, 300, "lidar: frames per sequence (10 scans a second)");
 ABSL_FLAG(std::string, style, "urban",
           "lidar: street style urban, suburban, open or parking; a comma-separated list is "
           "cycled through the sequences");
+ABSL_FLAG(int, azimuth_steps, 2000,
+          "lidar: azimuths per revolution (HDL-64E at 10 Hz: 2000; fewer thin the scans, e.g. "
+          "500 for small sample data)");
 ABSL_FLAG(std::string, kitti, "",
           "pairs --protocol lidar: root of a KITTI odometry layout (holding sequences/NN/), "
           "real or written by `rpsr data lidar`");
@@ -452,6 +455,7 @@ int RunLidar() {
     options.style = styles[s % styles.size()];
     options.frame_count = frames;
     options.seed = core::DeriveSeed(seed, static_cast<uint64_t>(s));
+    options.sensor.azimuth_steps = absl::GetFlag(FLAGS_azimuth_steps);
     options.thread_count = std::clamp(static_cast<int>(std::thread::hardware_concurrency()), 1, 16);
     absl::StatusOr<core::SimulatedKittiSummary> summary;
     {

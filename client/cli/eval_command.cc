@@ -35,10 +35,6 @@ ABSL_FLAG(std::string, manifest, "",
 ABSL_FLAG(bool, study, false,
           "--protocol objects: run the paper's study: clean plus noise, outliers, crop and "
           "jitter at each of the five levels (--count pairs each, the same objects throughout)");
-ABSL_FLAG(std::string, mode, "net+refine",
-          "net: the network alone; net+refine (default): the network, then the multi-scale GICP "
-          "on the trees (core/refine); refine: the refinement alone from the identity");
-ABSL_FLAG(int, tree_depth, 6, "depth of the trees built from the clouds (>= 5)");
 ABSL_FLAG(std::string, recall, "",
           "recall thresholds: objects ((1 deg, 0.01) and (5 deg, 0.05)) or lidar ((1 deg, 0.3 "
           "m)); default from --protocol");

@@ -11,7 +11,8 @@
 
 ABSL_FLAG(std::string, output, "",
           "the folder written: train: model.rpsrw, last.rpsrw, the state and the log; data: the "
-          "clouds, manifest.csv and the simulated sequences");
+          "clouds, manifest.csv and the simulated sequences; demo: the pictures (default "
+          "rpsr-demo); odometry: the poses FILE (KITTI format)");
 ABSL_FLAG(std::string, protocol, "objects",
           "objects: the paper's ModelNet-style protocol on procedural objects (train: the M2 seen "
           "classes; data: --split); lidar: pairs of frames i and i+5 (train: simulated HDL-64E "
@@ -42,6 +43,14 @@ ABSL_FLAG(int, threads, 1, "LibTorch intra-op threads");
 ABSL_FLAG(std::string, model, "",
           "eval, calibrate: a weights file (.rpsrw) or the name of a model embedded in the binary "
           "(objects; lidar when shipped); default: the embedded object model");
+ABSL_FLAG(std::string, mode, "net+refine",
+          "eval, register, odometry: net: the network alone; net+refine (eval's default): the "
+          "network, then the multi-scale GICP on the trees (core/refine); refine: the refinement "
+          "alone from the identity (register and odometry choose net+refine for objects and "
+          "refine for LiDAR scenes with the object model when not given)");
+ABSL_FLAG(int, tree_depth, 6,
+          "depth of the trees built from the clouds (>= 5); register and odometry choose 6 for "
+          "objects and 9 for LiDAR scenes when not given");
 
 namespace rpsr::client {
 

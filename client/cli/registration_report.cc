@@ -1,0 +1,164 @@
+#include "client/cli/registration_report.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
+#include "core/data/registration_metrics.h"
+
+namespace rpsr::client {
+namespace {
+
+std::string JsonNumbers(const double* values, int count) {
+  std::string out = "[";
+  for (int i = 0; i < count; ++i) {
+    absl::StrAppendFormat(&out, "%s%.9g", i == 0 ? "" : ", ", values[i]);
+  }
+  return out + "]";
+}
+
+double Diagonal(const core::PointCloud& cloud) {
+  const Eigen::AlignedBox3f box = core::BoundsOf(cloud.points);
+  return box.isEmpty() ? 0.0 : static_cast<double>(box.sizes().norm());
+}
+
+}  // namespace
+
+PairReport ReportOf(const core::RegistrationResult& result, double seconds) {
+  PairReport report;
+  report.T_target_source = result.T_target_source;
+  report.valid = result.valid;
+  report.failure_reason = result.failure_reason;
+  report.confidence = result.confidence;
+  report.fitness = result.fitness;
+  report.inlier_rmse = result.inlier_rmse;
+  report.iterations = result.iterations;
+  report.mode = std::string(core::RegistrationModeName(result.mode));
+  report.seconds = seconds;
+  return report;
+}
+
+bool IsSceneScale(const core::PointCloud& cloud) { return Diagonal(cloud) > kSceneDiagonal; }
+
+int ChooseTreeDepth(const core::PointCloud& source, const core::PointCloud& target, int requested) {
+  if (requested > 0) return requested;
+  return IsSceneScale(source) || IsSceneScale(target) ? 9 : 6;
+}
+
+std::string ChooseMode(const core::PointCloud& source, const core::PointCloud& target,
+                       const std::string& requested, const std::string& model_name,
+                       std::string* why) {
+  if (!requested.empty()) {
+    if (why != nullptr) *why = "as asked";
+    return requested;
+  }
+  const bool scene = IsSceneScale(source) || IsSceneScale(target);
+  if (scene && model_name.find("lidar") == std::string::npos) {
+    if (why != nullptr) {
+      *why = "scene-scale clouds and an object model: refinement from identity";
+    }
+    return "refine";
+  }
+  if (why != nullptr) *why = "the default";
+  return "net+refine";
+}
+
+PoseError PoseErrorOf(const Eigen::Isometry3d& estimate, const Eigen::Isometry3d& truth) {
+  const core::PairError error = core::ErrorOf(estimate, truth);
+  return {error.rotation_deg, error.translation};
+}
+
+std::string FormatReportText(const PairReport& report) {
+  const Eigen::Matrix3d R = report.T_target_source.linear();
+  const Eigen::Vector3d t = report.T_target_source.translation();
+  const Eigen::Quaterniond q(R);
+  std::string out;
+  absl::StrAppendFormat(&out, "R =\n");
+  for (int r = 0; r < 3; ++r) {
+    absl::StrAppendFormat(&out, "  % .6f % .6f % .6f\n", R(r, 0), R(r, 1), R(r, 2));
+  }
+  absl::StrAppendFormat(&out, "t = % .6f % .6f % .6f\n", t.x(), t.y(), t.z());
+  absl::StrAppendFormat(&out, "quaternion (w x y z) = % .6f % .6f % .6f % .6f\n", q.w(), q.x(),
+                        q.y(), q.z());
+  absl::StrAppendFormat(&out,
+                        "valid %s, confidence %.3f, fitness %.3f, inlier RMSE %.4g, %d "
+                        "iterations, mode %s, %.1f ms\n",
+                        report.valid ? "yes" : "no", report.confidence, report.fitness,
+                        report.inlier_rmse, report.iterations, report.mode, 1e3 * report.seconds);
+  if (!report.valid && !report.failure_reason.empty()) {
+    absl::StrAppend(&out, "reason: ", report.failure_reason, "\n");
+  }
+  if (report.truth) {
+    const PoseError error = PoseErrorOf(report.T_target_source, *report.truth);
+    absl::StrAppendFormat(&out, "error vs truth: rotation %.3f deg, translation %.4g\n",
+                          error.rotation_deg, error.translation);
+  }
+  return out;
+}
+
+std::string FormatReportJson(const PairReport& report) {
+  Eigen::Matrix<double, 3, 3, Eigen::RowMajor> R = report.T_target_source.linear();
+  const Eigen::Vector3d t = report.T_target_source.translation();
+  const Eigen::Quaterniond q(report.T_target_source.linear());
+  const double quaternion[4] = {q.w(), q.x(), q.y(), q.z()};
+  std::string out = absl::StrCat(
+      "{\"valid\": ", report.valid ? "true" : "false",
+      ", \"failure_reason\": ", JsonString(report.failure_reason),
+      ", \"confidence\": ", absl::StrFormat("%.9g", report.confidence),
+      ", \"rotation\": ", JsonNumbers(R.data(), 9), ", \"translation\": ", JsonNumbers(t.data(), 3),
+      ", \"quaternion_wxyz\": ", JsonNumbers(quaternion, 4),
+      ", \"fitness\": ", absl::StrFormat("%.9g", report.fitness),
+      ", \"inlier_rmse\": ", absl::StrFormat("%.9g", report.inlier_rmse),
+      ", \"iterations\": ", report.iterations, ", \"mode\": ", JsonString(report.mode),
+      ", \"seconds\": ", absl::StrFormat("%.6f", report.seconds));
+  if (report.truth) {
+    const PoseError error = PoseErrorOf(report.T_target_source, *report.truth);
+    absl::StrAppendFormat(&out, ", \"rotation_error_deg\": %.9g, \"translation_error\": %.9g",
+                          error.rotation_deg, error.translation);
+  }
+  return out + "}";
+}
+
+std::string JsonString(const std::string& text) {
+  std::string out = "\"";
+  for (char c : text) {
+    if (c == '"' || c == '\\') {
+      out += '\\';
+      out += c;
+    } else if (static_cast<unsigned char>(c) < 0x20) {
+      absl::StrAppendFormat(&out, "\\u%04x", static_cast<int>(c));
+    } else {
+      out += c;
+    }
+  }
+  return out + "\"";
+}
+
+absl::StatusOr<PairReport> RegisterWithRegistrar(const core::Registrar& registrar,
+                                                 const core::PointCloud& source,
+                                                 const core::PointCloud& target, int tree_depth,
+                                                 const core::RegistrationOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  core::BarnesHutTreeOptions tree_options;
+  tree_options.max_depth = tree_depth;
+  absl::StatusOr<core::Octree> source_tree = core::BuildOctree(source, tree_options);
+  if (!source_tree.ok()) {
+    return absl::Status(source_tree.status().code(),
+                        absl::StrCat("source: ", source_tree.status().message()));
+  }
+  absl::StatusOr<core::Octree> target_tree = core::BuildOctree(target, tree_options);
+  if (!target_tree.ok()) {
+    return absl::Status(target_tree.status().code(),
+                        absl::StrCat("target: ", target_tree.status().message()));
+  }
+  absl::StatusOr<core::RegistrationResult> result =
+      registrar.Register(*source_tree, *target_tree, options);
+  if (!result.ok()) return result.status();
+  return ReportOf(*result,
+                  std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+}
+
+}  // namespace rpsr::client

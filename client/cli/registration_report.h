@@ -1,0 +1,74 @@
+// What `rpsr register`, `rpsr demo` and `rpsr odometry` share: choosing tree depth and mode for a
+// pair of clouds, one result type for local (core::Registrar) and remote (rpsr::client) answers,
+// and printing it as text or JSON.
+#ifndef RPSR_CLIENT_CLI_REGISTRATION_REPORT_H_
+#define RPSR_CLIENT_CLI_REGISTRATION_REPORT_H_
+
+#include <optional>
+#include <string>
+
+#include "Eigen/Geometry"
+#include "absl/status/statusor.h"
+#include "core/cloud/point_cloud.h"
+#include "core/registrar/registrar.h"
+
+namespace rpsr::client {
+
+// The registration of one pair, wherever it ran.
+struct PairReport {
+  Eigen::Isometry3d T_target_source = Eigen::Isometry3d::Identity();
+  bool valid = false;
+  std::string failure_reason;
+  double confidence = 0.0;
+  double fitness = 0.0;
+  double inlier_rmse = 0.0;
+  int iterations = 0;
+  std::string mode;
+  double seconds = 0.0;  // wall time of the registration as the caller saw it
+  // Against a known truth, when there is one.
+  std::optional<Eigen::Isometry3d> truth;
+};
+
+PairReport ReportOf(const core::RegistrationResult& result, double seconds);
+
+// Clouds whose bounding box diagonal exceeds this are LiDAR-like scenes (metres), smaller ones
+// objects (normalised into [-1, 1]^3 by the data generators).
+inline constexpr double kSceneDiagonal = 10.0;
+bool IsSceneScale(const core::PointCloud& cloud);
+
+// Tree depth: `requested` when > 0, else 6 for objects (what the network was trained on) and 9
+// for scenes (~0.5 m cells on a 240 m cube, where the refinement is accurate).
+int ChooseTreeDepth(const core::PointCloud& source, const core::PointCloud& target, int requested);
+
+// Mode: `requested` when not empty; else net+refine for objects and, for scenes, refine (from
+// identity) unless the model is a LiDAR model, since the shipped network is trained on objects
+// only. `why` (may be null) receives a short reason for the choice.
+std::string ChooseMode(const core::PointCloud& source, const core::PointCloud& target,
+                       const std::string& requested, const std::string& model_name,
+                       std::string* why);
+
+// "R =\n ...\nt = ..." block with the quaternion, validity, confidence, fit and time; with the
+// rotation/translation error against `truth` when set.
+std::string FormatReportText(const PairReport& report);
+// One JSON object (no trailing newline).
+std::string FormatReportJson(const PairReport& report);
+
+// Rotation error (degrees) and translation error (cloud units) of `estimate` against `truth`.
+struct PoseError {
+  double rotation_deg = 0.0;
+  double translation = 0.0;
+};
+PoseError PoseErrorOf(const Eigen::Isometry3d& estimate, const Eigen::Isometry3d& truth);
+
+std::string JsonString(const std::string& text);
+
+// Builds both trees (depth `tree_depth`) and registers in this process; the report's seconds
+// include the trees.
+absl::StatusOr<PairReport> RegisterWithRegistrar(const core::Registrar& registrar,
+                                                 const core::PointCloud& source,
+                                                 const core::PointCloud& target, int tree_depth,
+                                                 const core::RegistrationOptions& options);
+
+}  // namespace rpsr::client
+
+#endif  // RPSR_CLIENT_CLI_REGISTRATION_REPORT_H_

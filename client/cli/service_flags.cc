@@ -1,0 +1,66 @@
+#include "client/cli/service_flags.h"
+
+#include "absl/flags/flag.h"
+#include "absl/flags/internal/parse.h"
+#include "absl/strings/str_cat.h"
+#include "core/io/file_bytes.h"
+
+ABSL_FLAG(std::string, server, "",
+          "register, odometry, bench: host:port of a running rpsrd (or `rpsr serve`); empty: "
+          "register locally in this process");
+ABSL_FLAG(bool, local, false,
+          "register, odometry: run the registrar in this process (the default without --server)");
+ABSL_FLAG(bool, json, false, "print machine-readable JSON on stdout instead of text");
+ABSL_FLAG(std::string, token, "",
+          "bearer token sent to the server (one of its accepted tokens); serve: the token it "
+          "accepts (empty: no authentication)");
+ABSL_FLAG(std::string, tls_ca, "",
+          "PEM file of the root certificates that signed the server's TLS certificate; given: "
+          "connect with TLS");
+ABSL_FLAG(double, timeout_s, 60.0, "deadline of each call to the server, seconds");
+ABSL_FLAG(std::string, data, RPSR_EXAMPLES_DATA,
+          "demo, bench: the sample data folder (object/ and lidar/, each with a manifest.csv)");
+
+namespace rpsr::client {
+
+// Abseil 20220623 keeps CommandLineFlag::IsSpecifiedOnCommandLine private; the parser's own
+// record of the flags it saw is the same answer.
+std::string ExplicitModeFlag() {
+  if (!absl::flags_internal::WasPresentOnCommandLine("mode")) return "";
+  return absl::GetFlag(FLAGS_mode);
+}
+
+int ExplicitTreeDepthFlag() {
+  if (!absl::flags_internal::WasPresentOnCommandLine("tree_depth")) return 0;
+  return absl::GetFlag(FLAGS_tree_depth);
+}
+
+absl::StatusOr<bool> UseServerFlag() {
+  const bool server = !absl::GetFlag(FLAGS_server).empty();
+  if (server && absl::GetFlag(FLAGS_local)) {
+    return absl::InvalidArgumentError("give either --server ADDR or --local, not both");
+  }
+  return server;
+}
+
+#if RPSR_CLI_HAS_SERVICE
+absl::StatusOr<ClientOptions> ClientOptionsFromFlags() {
+  ClientOptions options;
+  options.address = absl::GetFlag(FLAGS_server);
+  options.bearer_token = absl::GetFlag(FLAGS_token);
+  const double timeout = absl::GetFlag(FLAGS_timeout_s);
+  if (!(timeout > 0)) return absl::InvalidArgumentError("--timeout_s must be positive");
+  options.default_deadline = absl::Seconds(timeout);
+  const std::string ca = absl::GetFlag(FLAGS_tls_ca);
+  if (!ca.empty()) {
+    absl::StatusOr<std::string> pem = core::ReadFileBytes(ca);
+    if (!pem.ok())
+      return absl::Status(pem.status().code(), absl::StrCat("--tls_ca: ", pem.status().message()));
+    options.use_tls = true;
+    options.tls_root_certs_pem = *std::move(pem);
+  }
+  return options;
+}
+#endif
+
+}  // namespace rpsr::client

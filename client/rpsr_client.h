@@ -1,0 +1,300 @@
+// rpsr::client::Client: the C++ client of the rpsr registration service (rpsrd, proto/rpsr/v1).
+//
+//   auto client = rpsr::client::Client::Connect({.address = "127.0.0.1:50051"});
+//   auto session = (*client)->CreateSession({.tree_max_depth = 6});
+//   auto source = (*session)->Upload(source_points);        // streamed in chunks, tree built once
+//   auto target = (*session)->Upload(target_points);
+//   auto result = (*session)->Register(source->cloud_id, target->cloud_id);
+//   // result->T_target_source maps source points into the target frame; check result->valid.
+//
+// What it does for the caller:
+//  - chunks uploads under the server's message limit (packed little-endian float32 xyz);
+//  - retries calls answered UNAVAILABLE (server starting or draining, connection lost) with
+//    exponential backoff and full jitter, up to RetryOptions::max_attempts;
+//  - keeps (by default) the points of every cloud it uploaded, so when the server answers NOT_FOUND
+//    because the cloud was evicted or the session expired, it re-creates the session if needed,
+//    re-uploads and runs the call again; the cloud ids the caller holds stay valid;
+//  - attaches the bearer token and a deadline to every call;
+//  - returns errors as absl::Status with the server's code and message.
+//
+// Only Abseil, Eigen and the standard library appear here: no gRPC, protobuf or LibTorch types
+// (the implementation sits behind pimpl). Thread-safe: one Client and its Sessions may be used
+// from many threads at once; a Tracker is for one thread at a time.
+//
+// Conventions: T_target_source maps source points into the target frame (p_target = R p_source
+// + t); the clouds' units (metres for LiDAR); seconds.
+#ifndef RPSR_CLIENT_RPSR_CLIENT_H_
+#define RPSR_CLIENT_RPSR_CLIENT_H_
+
+#include <array>
+#include <cstdint>
+#include <future>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "Eigen/Core"
+#include "Eigen/Geometry"
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/time/time.h"
+#include "absl/types/span.h"
+
+namespace rpsr::client {
+
+// Retries of calls answered UNAVAILABLE. Attempt k (1-based) waits a uniformly random time in
+// [0, min(max_backoff, initial_backoff * multiplier^(k-1))] before the next ("full jitter", so
+// that many clients cut off at once do not come back in step).
+struct RetryOptions {
+  int max_attempts = 5;  // 1: no retry
+  absl::Duration initial_backoff = absl::Milliseconds(50);
+  absl::Duration max_backoff = absl::Seconds(2);
+  double multiplier = 2.0;
+};
+
+struct ClientOptions {
+  // host:port of rpsrd.
+  std::string address = "127.0.0.1:50051";
+  // TLS: true uses tls_root_certs_pem (PEM text) as the trusted roots, or the system's when
+  // empty. false: plaintext.
+  bool use_tls = false;
+  std::string tls_root_certs_pem;
+  // Sent as "authorization: Bearer <token>" when not empty.
+  std::string bearer_token;
+  // Deadline of each call (an upload's or a Track stream's whole life counts as one call for
+  // Upload; a Tracker's stream has none). Per-call overrides: RegisterOptions::timeout.
+  absl::Duration default_deadline = absl::Seconds(60);
+  // HTTP/2 keepalive pings on an idle connection; zero: none.
+  absl::Duration keepalive_time = absl::Seconds(30);
+  absl::Duration keepalive_timeout = absl::Seconds(10);
+  // Points per upload message; 0: 65,536 (768 KiB, well under the default 4 MiB limit).
+  uint64_t chunk_points = 0;
+  RetryOptions retry;
+};
+
+struct ServerLimits {
+  uint64_t max_points_per_cloud = 0;
+  uint32_t max_clouds_per_session = 0;
+  uint32_t max_sessions = 0;
+  uint64_t max_message_bytes = 0;
+  uint64_t max_inline_points = 0;
+  uint64_t memory_budget_bytes = 0;
+  int default_tree_max_depth = 0;
+  int min_tree_max_depth = 0;
+  int max_tree_max_depth = 0;
+  double default_ttl_seconds = 0.0;
+  double max_ttl_seconds = 0.0;
+  uint32_t max_batch = 0;
+  double max_queue_delay_seconds = 0.0;
+  uint32_t max_queue_size = 0;
+  uint32_t workers = 0;
+  uint64_t recommended_chunk_points = 0;
+};
+
+struct ServerInfo {
+  std::string server_version;
+  std::string api_version;
+  std::string model_name;
+  std::string model_description;
+  std::vector<std::string> modes;
+  std::string default_mode;
+  ServerLimits limits;
+  bool auth_required = false;
+};
+
+struct SessionOptions {
+  // Tree depth of this session's clouds; 0: the server's default (objects: 6, LiDAR: 8-9).
+  int tree_max_depth = 0;
+  // The model expected ("objects"); empty: whatever the server runs.
+  std::string model;
+  // Time to live after last use; zero: the server's default.
+  absl::Duration ttl = absl::ZeroDuration();
+  // Keep each uploaded cloud's points in the client, so that an evicted cloud is re-uploaded
+  // transparently. false saves the memory; an evicted cloud then answers NOT_FOUND.
+  bool keep_points_for_reupload = true;
+};
+
+// A cloud's Barnes-Hut tree as the server built it.
+struct TreeStats {
+  uint64_t num_points = 0;
+  int max_depth = 0;
+  std::vector<uint32_t> nodes_per_depth;
+  uint64_t memory_bytes = 0;
+  Eigen::Vector3d cube_center = Eigen::Vector3d::Zero();
+  double cube_half_length = 0.0;
+  double build_seconds = 0.0;
+};
+
+struct UploadedCloud {
+  uint64_t cloud_id = 0;  // valid in this Session for the caller, even across re-uploads
+  TreeStats tree;
+  double upload_seconds = 0.0;  // client side, first to last byte and the answer
+};
+
+struct RegisterOptions {
+  // "net", "net+refine" or "refine"; empty: the server's default (net+refine).
+  std::string mode;
+  int passes = 0;  // network passes; 0: the model's default
+  std::optional<Eigen::Isometry3d> initial_T_target_source;
+  // Server-side time budget (queued requests past it are dropped unrun); zero: none.
+  absl::Duration server_deadline = absl::ZeroDuration();
+  // The gRPC deadline of this call; zero: ClientOptions::default_deadline.
+  absl::Duration timeout = absl::ZeroDuration();
+};
+
+// Server-side seconds per stage (see proto Timings).
+struct ServerTimings {
+  double queue_seconds = 0.0;
+  double tree_seconds = 0.0;
+  double net_seconds = 0.0;
+  double refine_seconds = 0.0;
+  double confidence_seconds = 0.0;
+  double registrar_seconds = 0.0;
+  double server_seconds = 0.0;
+  uint32_t batch_size = 0;
+};
+
+struct RegistrationResult {
+  Eigen::Isometry3d T_target_source = Eigen::Isometry3d::Identity();
+  // false: do not use T; failure_reason says why.
+  bool valid = false;
+  std::string failure_reason;
+  // Calibrated probability that T is within (1 degree, 1% of the target's extent) of the truth.
+  double confidence = 0.0;
+  double fitness = 0.0;
+  double inlier_rmse = 0.0;
+  int iterations = 0;
+  bool converged = false;
+  Eigen::Matrix<double, 6, 6> information = Eigen::Matrix<double, 6, 6>::Zero();
+  std::array<bool, 6> degenerate_axes = {};  // rotation x, y, z, translation x, y, z
+  int num_degenerate = 0;
+  Eigen::Isometry3d net_T_target_source = Eigen::Isometry3d::Identity();
+  double net_score_peak = 0.0;
+  std::string mode;
+  ServerTimings timings;
+  // Client side: from the first attempt's start to the answer (retries and re-uploads included).
+  double round_trip_seconds = 0.0;
+};
+
+struct TrackerOptions {
+  RegisterOptions registration;
+  // Start each frame's registration from the previous relative motion (LiDAR odometry).
+  bool constant_velocity_prior = false;
+};
+
+struct TrackedFrame {
+  uint64_t frame_index = 0;
+  // T_previous_current; absent for frame 0.
+  std::optional<RegistrationResult> relative;
+  // T_frame0_current.
+  Eigen::Isometry3d T_frame0_current = Eigen::Isometry3d::Identity();
+  TreeStats tree;
+  double round_trip_seconds = 0.0;
+};
+
+class ClientChannel;
+class SessionState;
+class TrackerStream;
+
+// Odometry over the Track stream: each frame is uploaded once and registered on the previous one.
+// Not thread-safe; not retried (a broken stream ends the tracking: start a new Tracker).
+class Tracker {
+ public:
+  ~Tracker();  // finishes the stream if Finish was not called
+  Tracker(const Tracker&) = delete;
+  Tracker& operator=(const Tracker&) = delete;
+
+  // Streams the frame and waits for its answer.
+  absl::StatusOr<TrackedFrame> AddFrame(absl::Span<const Eigen::Vector3f> points);
+  // Half-closes the stream and returns its final status.
+  absl::Status Finish();
+
+ private:
+  friend class Session;
+  friend class Client;
+  explicit Tracker(std::unique_ptr<TrackerStream> stream);
+  std::unique_ptr<TrackerStream> stream_;
+};
+
+// A server session: a namespace of cached clouds with one tree depth and time to live.
+class Session {
+ public:
+  ~Session();  // closes the session on the server (best effort)
+  Session(const Session&) = delete;
+  Session& operator=(const Session&) = delete;
+
+  // The server's current id of this session (it changes if the session expired and was
+  // re-created).
+  std::string id() const;
+  // The effective options (defaults filled in by the server).
+  const SessionOptions& options() const;
+
+  absl::StatusOr<UploadedCloud> Upload(absl::Span<const Eigen::Vector3f> points);
+  std::future<absl::StatusOr<UploadedCloud>> UploadAsync(std::vector<Eigen::Vector3f> points);
+
+  absl::StatusOr<RegistrationResult> Register(uint64_t source_cloud_id, uint64_t target_cloud_id,
+                                              const RegisterOptions& options = {});
+  std::future<absl::StatusOr<RegistrationResult>> RegisterAsync(
+      uint64_t source_cloud_id, uint64_t target_cloud_id, const RegisterOptions& options = {});
+
+  // Uploads both clouds, registers them and releases them.
+  absl::StatusOr<RegistrationResult> Register(absl::Span<const Eigen::Vector3f> source,
+                                              absl::Span<const Eigen::Vector3f> target,
+                                              const RegisterOptions& options = {});
+
+  // Frees one cloud on the server (and its kept points).
+  absl::Status Release(uint64_t cloud_id);
+  // Closes the session on the server; later calls answer FailedPrecondition.
+  absl::Status Close();
+
+  // A Track stream whose frames use this session's tree options.
+  absl::StatusOr<std::unique_ptr<Tracker>> StartTracker(const TrackerOptions& options = {});
+
+ private:
+  friend class Client;
+  explicit Session(std::shared_ptr<SessionState> state);
+  std::shared_ptr<SessionState> state_;
+};
+
+class Client {
+ public:
+  // Creates the channel (connection is lazy: the first call connects). InvalidArgument for empty
+  // addresses or bad options.
+  static absl::StatusOr<std::unique_ptr<Client>> Connect(const ClientOptions& options);
+  ~Client();
+  Client(const Client&) = delete;
+  Client& operator=(const Client&) = delete;
+
+  const ClientOptions& options() const;
+
+  // Blocks until the channel is connected or `timeout` passes (DeadlineExceeded).
+  absl::Status WaitForConnected(absl::Duration timeout);
+
+  absl::StatusOr<ServerInfo> GetServerInfo();
+
+  absl::StatusOr<std::unique_ptr<Session>> CreateSession(const SessionOptions& options = {});
+
+  // Registers two small clouds sent inline (at most ServerLimits::max_inline_points each), no
+  // session needed; trees at the server's default depth.
+  absl::StatusOr<RegistrationResult> RegisterInline(absl::Span<const Eigen::Vector3f> source,
+                                                    absl::Span<const Eigen::Vector3f> target,
+                                                    const RegisterOptions& options = {});
+  std::future<absl::StatusOr<RegistrationResult>> RegisterInlineAsync(
+      std::vector<Eigen::Vector3f> source, std::vector<Eigen::Vector3f> target,
+      const RegisterOptions& options = {});
+
+  // A Track stream with the server's default tree options (see Session::StartTracker).
+  absl::StatusOr<std::unique_ptr<Tracker>> StartTracker(const TrackerOptions& options = {});
+
+ private:
+  explicit Client(std::shared_ptr<ClientChannel> channel);
+  std::shared_ptr<ClientChannel> channel_;
+};
+
+// The wait before retry `attempt` (1-based) with full jitter, `uniform01` a draw in [0, 1).
+absl::Duration RetryBackoff(const RetryOptions& options, int attempt, double uniform01);
+
+}  // namespace rpsr::client
+
+#endif  // RPSR_CLIENT_RPSR_CLIENT_H_
