@@ -1,0 +1,324 @@
+// rpsr::Client against the real service started in-process on 127.0.0.1 (server/rpsr_server.h):
+// every call the library offers, its recovery (retries while the server is away, re-upload of an
+// evicted cloud, a re-created session) and its errors.
+#include "client/rpsr_client.h"
+
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <future>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "core/data/pair_manifest.h"
+#include "core/data/registration_metrics.h"
+#include "core/io/point_cloud_io.h"
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "server/rpsr_server.h"
+
+namespace rpsr::client {
+namespace {
+
+using ::testing::HasSubstr;
+
+struct SamplePair {
+  core::PointCloud source;
+  core::PointCloud target;
+  Eigen::Isometry3d truth;
+};
+
+SamplePair LoadSample(const std::string& name) {
+  const std::string manifest =
+      absl::StrCat(RPSR_SOURCE_DIR, "/client/examples/data/", name, "/manifest.csv");
+  absl::StatusOr<std::vector<core::ManifestRow>> rows = core::ReadPairManifest(manifest);
+  EXPECT_TRUE(rows.ok()) << rows.status();
+  SamplePair pair;
+  pair.source = *core::ReadPointCloud(rows->front().source);
+  pair.target = *core::ReadPointCloud(rows->front().target);
+  pair.truth = *rows->front().T_target_source;
+  return pair;
+}
+
+server::ServerOptions TestServerOptions() {
+  server::ServerOptions options;
+  options.address = "127.0.0.1:0";
+  options.metrics_address = "";
+  options.log_requests = false;
+  return options;
+}
+
+// A port nothing listens on (bound and released by the kernel's choice).
+int FreePort() {
+  const int fd = socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  address.sin_port = 0;
+  bind(fd, reinterpret_cast<sockaddr*>(&address), sizeof(address));
+  socklen_t length = sizeof(address);
+  getsockname(fd, reinterpret_cast<sockaddr*>(&address), &length);
+  close(fd);
+  return ntohs(address.sin_port);
+}
+
+class RpsrClientTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    absl::StatusOr<std::unique_ptr<server::RunningServer>> running =
+        server::StartServer(TestServerOptions());
+    ASSERT_TRUE(running.ok()) << running.status();
+    server_ = running->release();
+    object_ = new SamplePair(LoadSample("object"));
+  }
+  static void TearDownTestSuite() {
+    delete server_;
+    delete object_;
+  }
+
+  std::unique_ptr<Client> Connect(ClientOptions options = {}) {
+    options.address = server_->target();
+    absl::StatusOr<std::unique_ptr<Client>> client = Client::Connect(options);
+    EXPECT_TRUE(client.ok()) << client.status();
+    return *std::move(client);
+  }
+
+  static server::RunningServer* server_;
+  static SamplePair* object_;
+};
+
+server::RunningServer* RpsrClientTest::server_ = nullptr;
+SamplePair* RpsrClientTest::object_ = nullptr;
+
+TEST_F(RpsrClientTest, ServerInfoNamesTheModelAndLimits) {
+  std::unique_ptr<Client> client = Connect();
+  absl::StatusOr<ServerInfo> info = client->GetServerInfo();
+  ASSERT_TRUE(info.ok()) << info.status();
+  EXPECT_EQ(info->model_name, "objects");
+  EXPECT_EQ(info->api_version, "rpsr.v1");
+  EXPECT_THAT(info->modes, ::testing::Contains("refine"));
+  EXPECT_GT(info->limits.max_points_per_cloud, 0u);
+  EXPECT_FALSE(info->auth_required);
+}
+
+TEST_F(RpsrClientTest, UploadsInChunksAndRegistersByIds) {
+  ClientOptions options;
+  options.chunk_points = 100;  // 1,024 points: 11 messages
+  std::unique_ptr<Client> client = Connect(options);
+  absl::StatusOr<std::unique_ptr<Session>> session = client->CreateSession({.tree_max_depth = 6});
+  ASSERT_TRUE(session.ok()) << session.status();
+  EXPECT_EQ((*session)->options().tree_max_depth, 6);
+  absl::StatusOr<UploadedCloud> source = (*session)->Upload(object_->source.points);
+  absl::StatusOr<UploadedCloud> target = (*session)->Upload(object_->target.points);
+  ASSERT_TRUE(source.ok()) << source.status();
+  ASSERT_TRUE(target.ok()) << target.status();
+  EXPECT_EQ(source->tree.num_points, object_->source.size());
+  EXPECT_EQ(source->tree.max_depth, 6);
+  EXPECT_NE(source->cloud_id, target->cloud_id);
+  absl::StatusOr<RegistrationResult> result =
+      (*session)->Register(source->cloud_id, target->cloud_id);
+  ASSERT_TRUE(result.ok()) << result.status();
+  EXPECT_TRUE(result->valid) << result->failure_reason;
+  const core::PairError error = core::ErrorOf(result->T_target_source, object_->truth);
+  EXPECT_LT(error.rotation_deg, 2.0);
+  EXPECT_LT(error.translation, 0.02);
+  EXPECT_EQ(result->mode, "net+refine");
+  EXPECT_GT(result->confidence, 0.0);
+  EXPECT_GT(result->round_trip_seconds, 0.0);
+  EXPECT_GE(result->timings.batch_size, 1u);
+  EXPECT_TRUE((*session)->Release(source->cloud_id).ok());
+  // Released: the library refuses the id before asking the server.
+  EXPECT_EQ((*session)->Register(source->cloud_id, target->cloud_id).status().code(),
+            absl::StatusCode::kInvalidArgument);
+}
+
+TEST_F(RpsrClientTest, CloudsInOneCallInlineAndAsyncAgree) {
+  std::unique_ptr<Client> client = Connect();
+  absl::StatusOr<std::unique_ptr<Session>> session = client->CreateSession();
+  ASSERT_TRUE(session.ok()) << session.status();
+  absl::StatusOr<RegistrationResult> uploaded =
+      (*session)->Register(object_->source.points, object_->target.points);
+  ASSERT_TRUE(uploaded.ok()) << uploaded.status();
+  absl::StatusOr<RegistrationResult> inline_result =
+      client->RegisterInline(object_->source.points, object_->target.points);
+  ASSERT_TRUE(inline_result.ok()) << inline_result.status();
+  // Same trees (the server's default depth), same answer.
+  EXPECT_TRUE(uploaded->T_target_source.isApprox(inline_result->T_target_source, 1e-6));
+  std::vector<std::future<absl::StatusOr<RegistrationResult>>> futures;
+  for (int i = 0; i < 6; ++i) {
+    futures.push_back(client->RegisterInlineAsync(object_->source.points, object_->target.points));
+  }
+  for (auto& future : futures) {
+    absl::StatusOr<RegistrationResult> result = future.get();
+    ASSERT_TRUE(result.ok()) << result.status();
+    // Batched or not, the same pose (within the network's batching tolerance).
+    EXPECT_TRUE(result->T_target_source.isApprox(uploaded->T_target_source, 1e-4));
+  }
+  absl::StatusOr<UploadedCloud> source = (*session)->UploadAsync(object_->source.points).get();
+  ASSERT_TRUE(source.ok()) << source.status();
+  absl::StatusOr<UploadedCloud> target = (*session)->UploadAsync(object_->target.points).get();
+  ASSERT_TRUE(target.ok()) << target.status();
+  absl::StatusOr<RegistrationResult> async_by_ids =
+      (*session)->RegisterAsync(source->cloud_id, target->cloud_id).get();
+  ASSERT_TRUE(async_by_ids.ok()) << async_by_ids.status();
+  EXPECT_TRUE(async_by_ids->T_target_source.isApprox(uploaded->T_target_source, 1e-6));
+}
+
+TEST_F(RpsrClientTest, BadCloudsGetTheServersMessage) {
+  std::unique_ptr<Client> client = Connect();
+  absl::StatusOr<std::unique_ptr<Session>> session = client->CreateSession();
+  ASSERT_TRUE(session.ok()) << session.status();
+  std::vector<Eigen::Vector3f> bad = object_->source.points;
+  bad[7].y() = std::nanf("");
+  absl::StatusOr<UploadedCloud> uploaded = (*session)->Upload(bad);
+  EXPECT_EQ(uploaded.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_FALSE(uploaded.status().message().empty());
+  EXPECT_EQ((*session)->Upload({}).status().code(), absl::StatusCode::kInvalidArgument);
+  RegisterOptions options;
+  options.mode = "sideways";
+  absl::StatusOr<RegistrationResult> result =
+      client->RegisterInline(object_->source.points, object_->target.points, options);
+  EXPECT_EQ(result.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(result.status().message(), HasSubstr("sideways"));
+}
+
+TEST_F(RpsrClientTest, TrackerComposesRelativePoses) {
+  const SamplePair lidar = LoadSample("lidar");
+  std::unique_ptr<Client> client = Connect();
+  absl::StatusOr<std::unique_ptr<Session>> session = client->CreateSession({.tree_max_depth = 9});
+  ASSERT_TRUE(session.ok()) << session.status();
+  TrackerOptions options;
+  options.registration.mode = "refine";
+  absl::StatusOr<std::unique_ptr<Tracker>> tracker = (*session)->StartTracker(options);
+  ASSERT_TRUE(tracker.ok()) << tracker.status();
+  // Frame 0 = the target scan, frame 1 = the source scan: the relative pose T_previous_current is
+  // the manifest's T_target_source.
+  absl::StatusOr<TrackedFrame> first = (*tracker)->AddFrame(lidar.target.points);
+  ASSERT_TRUE(first.ok()) << first.status();
+  EXPECT_EQ(first->frame_index, 0u);
+  EXPECT_FALSE(first->relative.has_value());
+  EXPECT_TRUE(first->T_frame0_current.isApprox(Eigen::Isometry3d::Identity()));
+  absl::StatusOr<TrackedFrame> second = (*tracker)->AddFrame(lidar.source.points);
+  ASSERT_TRUE(second.ok()) << second.status();
+  ASSERT_TRUE(second->relative.has_value());
+  EXPECT_TRUE(second->relative->valid) << second->relative->failure_reason;
+  const core::PairError error = core::ErrorOf(second->relative->T_target_source, lidar.truth);
+  EXPECT_LT(error.rotation_deg, 0.5);
+  EXPECT_LT(error.translation, 0.1);
+  EXPECT_TRUE(second->T_frame0_current.isApprox(second->relative->T_target_source, 1e-9));
+  EXPECT_TRUE((*tracker)->Finish().ok());
+}
+
+TEST(RpsrClientRecoveryTest, EvictedCloudsAreUploadedAgain) {
+  const SamplePair object = LoadSample("object");
+  server::ServerOptions options = TestServerOptions();
+  // Room for about two object trees at depth 6: uploading more evicts the oldest.
+  options.cache.memory_budget_bytes = 700'000;
+  absl::StatusOr<std::unique_ptr<server::RunningServer>> running = server::StartServer(options);
+  ASSERT_TRUE(running.ok()) << running.status();
+  absl::StatusOr<std::unique_ptr<Client>> client =
+      Client::Connect({.address = (*running)->target()});
+  ASSERT_TRUE(client.ok());
+  for (bool keep_points : {true, false}) {
+    SCOPED_TRACE(keep_points ? "points kept" : "points not kept");
+    absl::StatusOr<std::unique_ptr<Session>> session =
+        (*client)->CreateSession({.tree_max_depth = 6, .keep_points_for_reupload = keep_points});
+    ASSERT_TRUE(session.ok()) << session.status();
+    absl::StatusOr<UploadedCloud> source = (*session)->Upload(object.source.points);
+    absl::StatusOr<UploadedCloud> target = (*session)->Upload(object.target.points);
+    ASSERT_TRUE(source.ok() && target.ok());
+    ASSERT_LT(2 * source->tree.memory_bytes, options.cache.memory_budget_bytes);
+    for (int i = 0; i < 3; ++i) ASSERT_TRUE((*session)->Upload(object.target.points).ok());
+    absl::StatusOr<RegistrationResult> result =
+        (*session)->Register(source->cloud_id, target->cloud_id);
+    if (keep_points) {
+      ASSERT_TRUE(result.ok()) << result.status();
+      EXPECT_LT(core::ErrorOf(result->T_target_source, object.truth).rotation_deg, 2.0);
+    } else {
+      EXPECT_EQ(result.status().code(), absl::StatusCode::kNotFound);
+      EXPECT_THAT(result.status().message(), HasSubstr("evicted"));
+    }
+  }
+}
+
+TEST(RpsrClientRecoveryTest, RetriesWhileTheServerIsAway) {
+  const int port = FreePort();
+  ClientOptions client_options;
+  client_options.address = absl::StrCat("127.0.0.1:", port);
+  client_options.retry = {.max_attempts = 12,
+                          .initial_backoff = absl::Milliseconds(100),
+                          .max_backoff = absl::Milliseconds(800),
+                          .multiplier = 2.0};
+  absl::StatusOr<std::unique_ptr<Client>> client = Client::Connect(client_options);
+  ASSERT_TRUE(client.ok());
+  // Without retries, nobody listening is UNAVAILABLE at once.
+  ClientOptions no_retry = client_options;
+  no_retry.retry.max_attempts = 1;
+  absl::StatusOr<std::unique_ptr<Client>> impatient = Client::Connect(no_retry);
+  ASSERT_TRUE(impatient.ok());
+  EXPECT_EQ((*impatient)->GetServerInfo().status().code(), absl::StatusCode::kUnavailable);
+
+  std::unique_ptr<server::RunningServer> late_server;
+  std::thread starter([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(400));
+    server::ServerOptions options = TestServerOptions();
+    options.address = client_options.address;
+    absl::StatusOr<std::unique_ptr<server::RunningServer>> running = server::StartServer(options);
+    ASSERT_TRUE(running.ok()) << running.status();
+    late_server = *std::move(running);
+  });
+  absl::StatusOr<ServerInfo> info = (*client)->GetServerInfo();
+  starter.join();
+  ASSERT_TRUE(info.ok()) << info.status();
+  EXPECT_EQ(info->model_name, "objects");
+}
+
+TEST(RpsrClientRecoveryTest, BearerTokenIsSentAndChecked) {
+  server::ServerOptions options = TestServerOptions();
+  options.auth_tokens = {"s3cret"};
+  absl::StatusOr<std::unique_ptr<server::RunningServer>> running = server::StartServer(options);
+  ASSERT_TRUE(running.ok()) << running.status();
+  absl::StatusOr<std::unique_ptr<Client>> anonymous =
+      Client::Connect({.address = (*running)->target()});
+  ASSERT_TRUE(anonymous.ok());
+  EXPECT_EQ((*anonymous)->CreateSession().status().code(), absl::StatusCode::kUnauthenticated);
+  absl::StatusOr<std::unique_ptr<Client>> wrong =
+      Client::Connect({.address = (*running)->target(), .bearer_token = "guess"});
+  ASSERT_TRUE(wrong.ok());
+  EXPECT_EQ((*wrong)->CreateSession().status().code(), absl::StatusCode::kUnauthenticated);
+  absl::StatusOr<std::unique_ptr<Client>> trusted =
+      Client::Connect({.address = (*running)->target(), .bearer_token = "s3cret"});
+  ASSERT_TRUE(trusted.ok());
+  absl::StatusOr<std::unique_ptr<Session>> session = (*trusted)->CreateSession();
+  EXPECT_TRUE(session.ok()) << session.status();
+}
+
+TEST(RpsrClientOptionsTest, ConnectRejectsBadOptions) {
+  EXPECT_EQ(Client::Connect({.address = ""}).status().code(), absl::StatusCode::kInvalidArgument);
+  ClientOptions options;
+  options.retry.max_attempts = 0;
+  EXPECT_EQ(Client::Connect(options).status().code(), absl::StatusCode::kInvalidArgument);
+  options = {};
+  options.tls_root_certs_pem = "-----BEGIN CERTIFICATE-----";
+  EXPECT_EQ(Client::Connect(options).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+TEST(RpsrClientOptionsTest, BackoffGrowsWithFullJitterUnderTheCap) {
+  const RetryOptions retry{.max_attempts = 10,
+                           .initial_backoff = absl::Milliseconds(50),
+                           .max_backoff = absl::Seconds(1),
+                           .multiplier = 2.0};
+  EXPECT_EQ(RetryBackoff(retry, 1, 1.0), absl::Milliseconds(50));
+  EXPECT_EQ(RetryBackoff(retry, 3, 1.0), absl::Milliseconds(200));
+  EXPECT_EQ(RetryBackoff(retry, 3, 0.5), absl::Milliseconds(100));
+  EXPECT_EQ(RetryBackoff(retry, 3, 0.0), absl::ZeroDuration());
+  EXPECT_EQ(RetryBackoff(retry, 9, 1.0), absl::Seconds(1));  // 12.8 s capped
+}
+
+}  // namespace
+}  // namespace rpsr::client
