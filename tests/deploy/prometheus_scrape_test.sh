@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # A real Prometheus (Debian's, deploy/prometheus/prometheus.yml with its alert rules) on
 # 127.0.0.1 scraping a real rpsrd; its HTTP API must show the target up, rpsr metrics with the
-# model loaded, and the alert rules loaded and healthy. Free ports, a temporary folder, both
+# model loaded, the request counters of a few real calls by method and code, and the alert rules
+# loaded and healthy. Free ports, a temporary folder, both
 # processes ended at exit.
 #   tests/deploy/prometheus_scrape_test.sh RPSRD_BINARY
 set -euo pipefail
@@ -18,6 +19,10 @@ fi
 for tool in curl jq python3; do
   command -v "$tool" >/dev/null || { echo "SKIP: $tool not installed"; exit 77; }
 done
+if ! /usr/bin/python3 -c 'import grpc' 2>/dev/null; then
+  echo "SKIP: python3-grpcio not installed (Debian package; deploy/setup.sh installs it)"
+  exit 77
+fi
 
 work=$(mktemp -d)
 pids=()
@@ -63,6 +68,30 @@ until [ "$(query 'rpsr_model_loaded{job="rpsrd"}' 2>/dev/null | jq -r '.data.res
   sleep 1
 done
 echo "rpsr_model_loaded = 1 after $SECONDS s"
+
+# A few calls, so that the request counters carry method and code labels: GetServerInfo (OK) and
+# CloseSession of an unknown session (NOT_FOUND), messages encoded by hand.
+/usr/bin/python3 - "127.0.0.1:$grpc_port" <<'PY' || fail "the gRPC calls did not answer as expected"
+import sys, grpc
+with grpc.insecure_channel(sys.argv[1]) as channel:
+    info = channel.unary_unary("/rpsr.v1.RegistrationService/GetServerInfo")
+    for _ in range(3):
+        assert len(info(b"", timeout=10)) > 0
+    close = channel.unary_unary("/rpsr.v1.RegistrationService/CloseSession")
+    try:
+        close(b"\x0a\x0bno-such-one", timeout=10)  # CloseSessionRequest{session_id}
+        sys.exit("CloseSession of an unknown session succeeded")
+    except grpc.RpcError as error:
+        assert error.code() == grpc.StatusCode.NOT_FOUND, error
+PY
+deadline=$((SECONDS + 30))
+until [ "$(query 'sum(rpsr_requests_total{job="rpsrd",method="GetServerInfo",code="OK"})' | jq -r '.data.result[0].value[1] // empty')" = 3 ] &&
+      [ "$(query 'sum(rpsr_requests_total{job="rpsrd",method="CloseSession",code="NOT_FOUND"})' | jq -r '.data.result[0].value[1] // empty')" = 1 ]; do
+  [ $SECONDS -lt $deadline ] || fail "Prometheus never saw the 3 GetServerInfo OK and 1 CloseSession NOT_FOUND calls"
+  sleep 1
+done
+n=$(query 'rpsr_request_duration_seconds_count{job="rpsrd",method="GetServerInfo"}' | jq -r '.data.result[0].value[1] // empty')
+[ "$n" = 3 ] || fail "rpsr_request_duration_seconds_count for GetServerInfo is '$n', not 3"
 
 targets=$(curl -sf "$api/targets")
 [ "$(jq -r '.data.activeTargets[] | select(.labels.job == "rpsrd") | .health' <<<"$targets")" = up ] ||
