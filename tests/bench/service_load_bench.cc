@@ -3,14 +3,18 @@
 // sending its next request as soon as the previous one is answered.
 //
 // Parts (--part, default all):
-//   inproc   the DynamicBatcher alone driving core::Registrar in this process: --clients producer
-//            threads at max_batch 1 and 16 (max_queue_delay 2 ms and 0), and the registrar called
-//            directly from one thread (the baseline of the service's added latency).
+//   inproc   the DynamicBatcher alone driving core::Registrar in this process: 1 and --clients
+//            producer threads at max_batch 1 and 16 (max_queue_delay 2 ms and 0), and the
+//            registrar called directly from one thread (the in-process baseline).
 //   service  the real gRPC server in-process (server/rpsr_server.h) on 127.0.0.1, one channel per
-//            client, clouds uploaded once per client and registered by id: max_batch 16 vs 1 at
-//            --clients clients, and one client against the registrar called directly.
-// Configurations alternate over --rounds rounds, so a machine whose load drifts (a shared build
-// machine) hurts them alike; the table gives each round and the medians over rounds.
+//            client, clouds uploaded once per client and registered by id: the same batching
+//            settings at 1 and --clients clients, and the registrar called directly.
+// Columns: throughput (answered pairs per second), latency percentiles seen by the clients, mean
+// batch size, and added_p50 = the median over calls of (latency - the registrar's own seconds for
+// the pair, from the result's timings): what the path around the registrar added (queue wait,
+// batch companions' share, thread hand-offs, gRPC). Configurations alternate over --rounds
+// rounds, so a machine whose load drifts (a shared build machine) hurts them alike; the table
+// gives each round and then the medians over rounds.
 //
 //   OMP_WAIT_POLICY=PASSIVE build/tests/bench/service_load_bench --clients=16 --seconds=8
 #include <algorithm>
@@ -64,9 +68,15 @@ struct Measurement {
   int failed = 0;
   double seconds = 0.0;
   double batch_size_sum = 0.0;  // over the measured calls, when the path reports it
+  // Per measured call: its latency less the registrar's own seconds for its pair (as the result's
+  // timings report them), i.e. what the path around the registrar added (queueing, batch
+  // companions, the service). Empty when the path does not report the registrar's time.
+  std::vector<double> added;
   std::string first_error;
 
-  double throughput() const { return latencies.size() / seconds; }
+  double pairs = 0.0;  // answered pairs (a call may carry several)
+
+  double throughput() const { return pairs / seconds; }
   double Percentile(double q) const {
     if (latencies.empty()) return 0.0;
     std::vector<double> sorted = latencies;
@@ -75,10 +85,21 @@ struct Measurement {
     return sorted[index];
   }
   double mean_batch() const { return latencies.empty() ? 0.0 : batch_size_sum / latencies.size(); }
+  double AddedPercentile(double q) const {
+    if (added.empty()) return -1.0;
+    std::vector<double> sorted = added;
+    std::sort(sorted.begin(), sorted.end());
+    return sorted[std::min(sorted.size() - 1, static_cast<size_t>(q * sorted.size()))];
+  }
 };
 
 // A call: returns OK (and the batch size it ran in, 0 if unknown) or the failure.
-using Call = std::function<absl::Status(int client, int* batch_size)>;
+struct CallInfo {
+  int pairs = 1;                    // pairs the call registered
+  int batch_size = 0;               // 0: unknown
+  double registrar_seconds = -1.0;  // < 0: unknown
+};
+using Call = std::function<absl::Status(int client, CallInfo* info)>;
 
 // `thread_init` runs first on each client's thread (e.g. LibTorch's per-thread intra-op setting).
 Measurement RunClosedLoop(int clients, absl::Duration warmup, absl::Duration measured,
@@ -96,13 +117,17 @@ Measurement RunClosedLoop(int clients, absl::Duration warmup, absl::Duration mea
       for (;;) {
         const absl::Time sent = absl::Now();
         if (sent >= window_end) break;
-        int batch_size = 0;
-        const absl::Status status = call(client, &batch_size);
+        CallInfo info;
+        const absl::Status status = call(client, &info);
         const absl::Time answered = absl::Now();
         if (answered < window_begin || answered > window_end) continue;
         if (status.ok()) {
           mine.latencies.push_back(absl::ToDoubleSeconds(answered - sent));
-          mine.batch_size_sum += batch_size;
+          mine.batch_size_sum += info.batch_size;
+          mine.pairs += info.pairs;
+          if (info.registrar_seconds >= 0) {
+            mine.added.push_back(absl::ToDoubleSeconds(answered - sent) - info.registrar_seconds);
+          }
         } else {
           if (mine.failed++ == 0) mine.first_error = status.ToString();
         }
@@ -116,6 +141,8 @@ Measurement RunClosedLoop(int clients, absl::Duration warmup, absl::Duration mea
     total.latencies.insert(total.latencies.end(), mine.latencies.begin(), mine.latencies.end());
     total.failed += mine.failed;
     total.batch_size_sum += mine.batch_size_sum;
+    total.pairs += mine.pairs;
+    total.added.insert(total.added.end(), mine.added.begin(), mine.added.end());
     if (total.first_error.empty()) total.first_error = mine.first_error;
   }
   return total;
@@ -159,33 +186,46 @@ struct Row {
   Measurement measurement;
 };
 
+std::string AddedColumn(double seconds) {
+  return seconds < -0.5 ? std::string("-") : absl::StrFormat("%.2f", 1e3 * seconds);
+}
+
 void PrintRow(const Row& row) {
   const Measurement& m = row.measurement;
-  std::printf("%-8s %-34s %5d %7d %9.1f %8.2f %8.2f %8.2f %7.2f %6d\n", row.part.c_str(),
+  std::printf("%-8s %-44s %5d %7d %9.1f %8.2f %8.2f %8.2f %7.2f %9s %6d\n", row.part.c_str(),
               row.config.c_str(), row.round, row.clients, m.throughput(), 1e3 * m.Percentile(0.5),
-              1e3 * m.Percentile(0.9), 1e3 * m.Percentile(0.99), m.mean_batch(), m.failed);
+              1e3 * m.Percentile(0.9), 1e3 * m.Percentile(0.99), m.mean_batch(),
+              AddedColumn(m.AddedPercentile(0.5)).c_str(), m.failed);
   if (m.failed > 0) std::printf("         first error: %s\n", m.first_error.c_str());
   std::fflush(stdout);
   const std::string csv = absl::GetFlag(FLAGS_csv);
   if (!csv.empty()) {
     FILE* file = std::fopen(csv.c_str(), "a");
     if (file == nullptr) return;
-    std::fprintf(file, "%s,%s,%d,%d,%.3f,%.4f,%.4f,%.4f,%.3f,%d\n", row.part.c_str(),
+    if (std::ftell(file) == 0) {
+      std::fprintf(file,
+                   "part,configuration,round,clients,pairs_per_s,p50_ms,p90_ms,p99_ms,mean_batch,"
+                   "added_p50_ms,failed\n");
+    }
+    std::fprintf(file, "%s,\"%s\",%d,%d,%.3f,%.4f,%.4f,%.4f,%.3f,%s,%d\n", row.part.c_str(),
                  row.config.c_str(), row.round, row.clients, m.throughput(),
                  1e3 * m.Percentile(0.5), 1e3 * m.Percentile(0.9), 1e3 * m.Percentile(0.99),
-                 m.mean_batch(), m.failed);
+                 m.mean_batch(), AddedColumn(m.AddedPercentile(0.5)).c_str(), m.failed);
     std::fclose(file);
   }
 }
 
+// added_p50_ms: the median over calls of (latency - the registrar's own seconds for the pair).
 void PrintHeader() {
-  std::printf("%-8s %-34s %5s %7s %9s %8s %8s %8s %7s %6s\n", "part", "configuration", "round",
-              "clients", "pairs/s", "p50_ms", "p90_ms", "p99_ms", "batch", "failed");
+  std::printf("%-8s %-44s %5s %7s %9s %8s %8s %8s %7s %9s %6s\n", "part", "configuration", "round",
+              "clients", "pairs/s", "p50_ms", "p90_ms", "p99_ms", "batch", "added_p50", "failed");
 }
 
 // Medians over rounds of each configuration, in first-seen order.
 void PrintMedians(const std::vector<Row>& rows) {
-  std::printf("\nmedians over rounds\n");
+  std::printf(
+      "\nmedians over rounds (added_p50: median over calls of latency minus the registrar's "
+      "own time for the pair)\n");
   PrintHeader();
   std::vector<std::string> seen;
   for (const Row& row : rows) {
@@ -202,13 +242,16 @@ void PrintMedians(const std::vector<Row>& rows) {
       std::sort(values.begin(), values.end());
       return values[values.size() / 2];
     };
-    std::printf("%-8s %-34s %5s %7d %9.1f %8.2f %8.2f %8.2f %7.2f %6s\n", row.part.c_str(),
-                row.config.c_str(), "med", row.clients,
-                median([](const Measurement& m) { return m.throughput(); }),
-                1e3 * median([](const Measurement& m) { return m.Percentile(0.5); }),
-                1e3 * median([](const Measurement& m) { return m.Percentile(0.9); }),
-                1e3 * median([](const Measurement& m) { return m.Percentile(0.99); }),
-                median([](const Measurement& m) { return m.mean_batch(); }), "");
+    std::printf(
+        "%-8s %-44s %5s %7d %9.1f %8.2f %8.2f %8.2f %7.2f %9s %6s\n", row.part.c_str(),
+        row.config.c_str(), "med", row.clients,
+        median([](const Measurement& m) { return m.throughput(); }),
+        1e3 * median([](const Measurement& m) { return m.Percentile(0.5); }),
+        1e3 * median([](const Measurement& m) { return m.Percentile(0.9); }),
+        1e3 * median([](const Measurement& m) { return m.Percentile(0.99); }),
+        median([](const Measurement& m) { return m.mean_batch(); }),
+        AddedColumn(median([](const Measurement& m) { return m.AddedPercentile(0.5); })).c_str(),
+        "");
   }
 }
 
@@ -245,10 +288,37 @@ Measurement MeasureDirect(const core::Registrar& registrar, const ObjectTrees& o
   return RunClosedLoop(
       1, absl::Seconds(absl::GetFlag(FLAGS_warmup_seconds)),
       absl::Seconds(absl::GetFlag(FLAGS_seconds)),
-      [&](int, int* batch_size) -> absl::Status {
+      [&](int, CallInfo* info) -> absl::Status {
         const int k = next++ % pairs;
-        *batch_size = 1;
-        return registrar.Register(objects.trees[2 * k], objects.trees[2 * k + 1], options).status();
+        auto result = registrar.Register(objects.trees[2 * k], objects.trees[2 * k + 1], options);
+        if (!result.ok()) return result.status();
+        info->batch_size = 1;
+        info->registrar_seconds = result->timings.total_seconds;
+        return absl::OkStatus();
+      },
+      [] { core::SetNetThreads(1); });
+}
+
+// The registrar's RegisterBatch of `batch` pairs called directly on one thread: what batching
+// buys at most, without queues or thread hand-offs (latency is the whole batch's).
+Measurement MeasureDirectBatch(const core::Registrar& registrar, const ObjectTrees& objects,
+                               const core::RegistrationOptions& options, int batch) {
+  const int pairs = static_cast<int>(objects.trees.size() / 2);
+  std::vector<core::RegistrationRequest> requests;
+  for (int i = 0; i < batch; ++i) {
+    const int k = i % pairs;
+    requests.push_back({&objects.trees[2 * k], &objects.trees[2 * k + 1], options});
+  }
+  return RunClosedLoop(
+      1, absl::Seconds(absl::GetFlag(FLAGS_warmup_seconds)),
+      absl::Seconds(absl::GetFlag(FLAGS_seconds)),
+      [&](int, CallInfo* info) -> absl::Status {
+        for (const auto& result : registrar.RegisterBatch(requests)) {
+          if (!result.ok()) return result.status();
+        }
+        info->pairs = batch;
+        info->batch_size = batch;
+        return absl::OkStatus();
       },
       [] { core::SetNetThreads(1); });
 }
@@ -278,11 +348,14 @@ Measurement MeasureInProcessBatcher(const core::Registrar& registrar, const Obje
   const server::DynamicBatcherStats before = (*batcher)->stats();
   Measurement measurement = RunClosedLoop(
       clients, absl::Seconds(absl::GetFlag(FLAGS_warmup_seconds)),
-      absl::Seconds(absl::GetFlag(FLAGS_seconds)), [&](int client, int*) -> absl::Status {
-        const int k = (client + pairs * next[client]++) % pairs;
+      absl::Seconds(absl::GetFlag(FLAGS_seconds)), [&](int client, CallInfo* info) -> absl::Status {
+        const int k = (client + next[client]++) % pairs;
         core::RegistrationRequest request{&objects.trees[2 * k], &objects.trees[2 * k + 1],
                                           options};
-        return (*batcher)->Submit(std::move(request)).get().status();
+        auto result = (*batcher)->Submit(std::move(request)).get();
+        if (!result.ok()) return result.status();
+        info->registrar_seconds = result->timings.total_seconds;
+        return absl::OkStatus();
       });
   const server::DynamicBatcherStats after = (*batcher)->stats();
   // The batcher does not say which batch a request ran in: the mean batch over the whole run
@@ -302,6 +375,14 @@ void RunInProcess(const core::Registrar& registrar, const ObjectTrees& objects,
     rows->push_back({"inproc", "registrar direct, 1 thread", round, 1,
                      MeasureDirect(registrar, objects, options)});
     PrintRow(rows->back());
+    rows->push_back({"inproc", "registrar RegisterBatch(16) direct", round, 1,
+                     MeasureDirectBatch(registrar, objects, options, 16)});
+    PrintRow(rows->back());
+    for (const BatchingConfig& config : BatchingConfigs()) {
+      rows->push_back({"inproc", "batcher " + config.Name() + ", 1 client", round, 1,
+                       MeasureInProcessBatcher(registrar, objects, options, config, 1)});
+      PrintRow(rows->back());
+    }
     for (const BatchingConfig& config : BatchingConfigs()) {
       rows->push_back({"inproc", "batcher " + config.Name(), round, clients,
                        MeasureInProcessBatcher(registrar, objects, options, config, clients)});
@@ -339,7 +420,7 @@ class ServiceClient {
     return absl::OkStatus();
   }
 
-  absl::Status Register(int k, const std::string& mode, int* batch_size) {
+  absl::Status Register(int k, const std::string& mode, CallInfo* info) {
     const int pairs = static_cast<int>(cloud_ids_.size() / 2);
     k %= pairs;
     grpc::ClientContext context;
@@ -355,7 +436,8 @@ class ServiceClient {
       return absl::Status(static_cast<absl::StatusCode>(status.error_code()),
                           status.error_message());
     }
-    *batch_size = static_cast<int>(response.result().timings().batch_size());
+    info->batch_size = static_cast<int>(response.result().timings().batch_size());
+    info->registrar_seconds = response.result().timings().registrar_seconds();
     return absl::OkStatus();
   }
 
@@ -414,9 +496,8 @@ Measurement MeasureService(std::shared_ptr<const core::Registrar> registrar,
   std::vector<int> next(clients, 0);
   Measurement measurement = RunClosedLoop(
       clients, absl::Seconds(absl::GetFlag(FLAGS_warmup_seconds)),
-      absl::Seconds(absl::GetFlag(FLAGS_seconds)),
-      [&](int client, int* batch_size) -> absl::Status {
-        return service_clients[client]->Register(client + next[client]++, mode, batch_size);
+      absl::Seconds(absl::GetFlag(FLAGS_seconds)), [&](int client, CallInfo* info) -> absl::Status {
+        return service_clients[client]->Register(client + next[client]++, mode, info);
       });
   service_clients.clear();
   (*running)->Shutdown(absl::Seconds(10));
