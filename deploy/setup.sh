@@ -4,7 +4,7 @@
 #   deploy/setup.sh              # dependencies + Release build of everything
 #   deploy/setup.sh --deps-only  # dependencies only
 #   deploy/setup.sh --core-only  # build core/ alone (no gRPC, server or client)
-#   deploy/setup.sh --with-peers # also Open3D and PCL for the side-by-side benchmark
+#   deploy/setup.sh --with-peers # also Open3D and PCL for tests/bench/peers (~300 pkgs, 1.1 GB)
 #
 # Runs as root (or with sudo available). Idempotent: re-running only rebuilds what changed.
 set -euo pipefail
