@@ -33,6 +33,10 @@ case "${1:-}" in
     port=$(docker-compose -f deploy/compose.yaml config | sed -n 's/.*--metrics_address=0.0.0.0:\([0-9]*\).*/\1/p')
     grep -q "targets: \[\"rpsrd:$port\"\]" deploy/prometheus/prometheus.yml ||
       fail "prometheus.yml does not scrape rpsrd:$port"
+    # Envoy (profile affinity) resolves the replicas by the name the rpsrd service is aliased to.
+    envoy_host=$(sed -n 's/.*socket_address: {address: \([a-z-]*\), port_value: 50051}.*/\1/p' deploy/envoy/envoy.yaml)
+    docker-compose -f deploy/compose.yaml config | grep -A3 'aliases:' | grep -q -- "- $envoy_host\$" ||
+      fail "compose's rpsrd has no network alias '$envoy_host' (Envoy's cluster address)"
     echo "compose: valid; services $services"
     ;;
   grafana)
