@@ -47,7 +47,7 @@ class PngCanvasTest : public ::testing::Test {
     return (fs::temp_directory_path() / absl::StrCat("rpsr_png_", getpid(), "_", name)).string();
   }
   void TearDown() override {
-    for (const std::string& name : {"a.png", "pair.png", "trajectory.png"}) fs::remove(Path(name));
+    for (const char* name : {"a.png", "pair.png", "trajectory.png"}) fs::remove(Path(name));
   }
 };
 

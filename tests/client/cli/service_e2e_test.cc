@@ -269,7 +269,7 @@ TEST_F(ServiceEndToEndTest, ServeAcceptsRegistrationsAndStopsOnSigterm) {
 }
 
 TEST_F(ServiceEndToEndTest, EverySubcommandHasHelp) {
-  for (const std::string& name : {"register", "odometry", "bench", "demo", "serve"}) {
+  for (const std::string name : {"register", "odometry", "bench", "demo", "serve"}) {
     Rpsr(absl::StrCat(name, " --help"));
     EXPECT_THAT(out_ + err_, HasSubstr("rpsr " + name)) << name;
   }
