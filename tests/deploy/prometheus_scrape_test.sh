@@ -110,6 +110,19 @@ alerts=$(jq '[.data.groups[].rules[] | select(.type == "alerting")] | length' <<
 bad=$(jq -r '[.data.groups[].rules[] | select(.health != "ok" and .health != "unknown") | .name] | join(",")' <<<"$rules")
 [ "$alerts" -ge 7 ] || fail "only $alerts alerting rules loaded"
 [ -z "$bad" ] || fail "rules in error: $bad"
+# Every query of the Grafana dashboard parses and evaluates (its variables substituted).
+dash=$root/deploy/grafana/dashboards/rpsr.json
+checked=0
+while IFS= read -r expr; do
+  expr=${expr//\$__rate_interval/1m}
+  expr=${expr//\$instance/.*}
+  expr=${expr//\$method/Register}
+  answer=$(curl -s --get --data-urlencode "query=$expr" "$api/query")
+  [ "$(jq -r .status <<<"$answer")" = success ] || fail "dashboard query fails: $expr: $(jq -r .error <<<"$answer")"
+  checked=$((checked + 1))
+done < <(jq -r '.panels[] | .targets[]? | .expr' "$dash")
+[ "$checked" -ge 20 ] || fail "only $checked dashboard queries found"
+echo "all $checked dashboard queries evaluate"
 # A freshly started, idle rpsrd fires nothing but may be pending on nothing either.
 firing=$(curl -sf "$api/alerts" | jq -r '[.data.alerts[] | select(.state == "firing") | .labels.alertname] | join(",")')
 [ -z "$firing" ] || fail "alerts firing on an idle rpsrd: $firing"
