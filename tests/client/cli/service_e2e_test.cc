@@ -218,6 +218,16 @@ TEST_F(ServiceEndToEndTest, OdometryOnASimulatedSequenceMeetsKittiThresholds) {
   EXPECT_EQ(std::vector<std::string>(absl::StrSplit(lines[0], ' ', absl::SkipEmpty())).size(), 12u);
   const std::string png = ReadText(*dir_ / "odometry" / "poses.png");
   EXPECT_EQ(png.substr(1, 3), "PNG");
+  // The same in this process, on the first 40 frames, with segments short enough for them.
+  ASSERT_EQ(Rpsr(absl::StrCat("odometry ", (kitti / "sequences" / "00").string(),
+                              " --local --max_frames 40 --segment_lengths 10,20 --plot none "
+                              "--output ",
+                              (*dir_ / "local_poses.txt").string(), " --json")),
+            0)
+      << err_;
+  EXPECT_EQ(JsonNumber(out_, "frames"), 40);
+  ASSERT_GE(JsonNumber(out_, "segments"), 1) << out_;
+  EXPECT_LT(JsonNumber(out_, "translation_error_percent"), 2.0) << out_;
 }
 
 TEST_F(ServiceEndToEndTest, BenchReportsThroughputAndPercentiles) {
