@@ -624,6 +624,63 @@ TEST(ServerLimitsTest, AFullQueueAnswersResourceExhaustedAtOnce) {
   server->Shutdown(absl::Seconds(5));
 }
 
+TEST(ServerLimitsTest, ExpiredAndCancelledRequestsLeaveTheQueueUnrun) {
+  ServerOptions options = TestOptions();
+  options.metrics_address = "127.0.0.1:0";
+  options.batching.max_batch = 1;
+  options.batching.workers = 1;
+  auto server = Start(options);
+  ASSERT_NE(server, nullptr);
+  ServiceTestClient client(server->target());
+  std::string session;
+  ASSERT_TRUE(client.CreateSession(&session).ok());
+  v1::UploadCloudResponse source, target;
+  ASSERT_TRUE(client.Upload(session, ObjectPair().source.points, &source).ok());
+  ASSERT_TRUE(client.Upload(session, ObjectPair().target.points, &target).ok());
+  v1::RegisterRequest request;
+  request.set_session_id(session);
+  request.set_source_cloud_id(source.cloud_id());
+  request.set_target_cloud_id(target.cloud_id());
+  request.mutable_options()->set_mode("net");
+
+  // A keeps the only worker busy (16 network passes); B's 5 ms budget and C's cancellation run out
+  // while they wait behind it; D runs after A.
+  v1::RegisterRequest slow = request;
+  slow.mutable_options()->set_passes(16);
+  v1::RegisterRequest brief = request;
+  brief.mutable_options()->set_deadline_seconds(0.005);
+  grpc::Status a, b, c, d;
+  std::thread first([&] {
+    v1::RegisterResponse response;
+    a = client.Register(slow, &response);
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  std::thread second([&] {
+    v1::RegisterResponse response;
+    b = client.Register(brief, &response);
+  });
+  grpc::ClientContext cancelled_context;
+  client.Prepare(&cancelled_context);
+  std::thread third([&] {
+    v1::RegisterResponse response;
+    c = client.stub().Register(&cancelled_context, request, &response);
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  cancelled_context.TryCancel();
+  std::thread fourth([&] {
+    v1::RegisterResponse response;
+    d = client.Register(request, &response);
+  });
+  for (std::thread* t : {&first, &second, &third, &fourth}) t->join();
+  EXPECT_TRUE(a.ok()) << a.error_message();
+  EXPECT_CODE(b, DEADLINE_EXCEEDED, "in the batch queue");
+  EXPECT_EQ(c.error_code(), grpc::StatusCode::CANCELLED);
+  EXPECT_TRUE(d.ok()) << d.error_message();
+  // Only A and D ran (one batch each); B and C left the queue unrun.
+  EXPECT_EQ(MetricValue(ScrapeMetrics(server->metrics_port()), "rpsr_batch_size_count"), 2.0);
+  server->Shutdown(absl::Seconds(5));
+}
+
 TEST(ServerAuthTest, BearerTokensAuthenticateAndOwnTheirSessions) {
   ServerOptions options = TestOptions();
   options.auth_tokens = {"alpha-token", "beta-token"};

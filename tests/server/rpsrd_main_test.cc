@@ -1,0 +1,110 @@
+// The rpsrd binary end to end: it starts with flags, logs key=value lines, serves, and drains and
+// exits 0 on SIGTERM.
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <string>
+#include <thread>
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "tests/server/service_test_client.h"
+
+namespace rpsr::server {
+namespace {
+
+using ::testing::HasSubstr;
+
+// The value of `key=` in a log line ("" if absent).
+std::string Field(const std::string& line, const std::string& key) {
+  const size_t at = line.find(" " + key + "=");
+  if (at == std::string::npos) return "";
+  const size_t begin = at + key.size() + 2;
+  return line.substr(begin, line.find(' ', begin) - begin);
+}
+
+TEST(RpsrdTest, ServesAndDrainsOnSigterm) {
+  int out[2];
+  ASSERT_EQ(pipe(out), 0);
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    dup2(out[1], STDERR_FILENO);
+    close(out[0]);
+    execl(RPSRD_PATH, RPSRD_PATH, "--address=127.0.0.1:0", "--metrics_address=", "--max_batch=4",
+          "--max_points_per_cloud=5000", "--drain_notice=200ms", static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  close(out[1]);
+  std::string log;
+  auto read_until = [&](const std::string& event) {
+    char buffer[4096];
+    const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (log.find("event=" + event) == std::string::npos &&
+           std::chrono::steady_clock::now() < give_up) {
+      const ssize_t n = read(out[0], buffer, sizeof(buffer));
+      if (n <= 0) break;
+      log.append(buffer, n);
+    }
+    const size_t at = log.find("event=" + event);
+    if (at == std::string::npos) return std::string();
+    const size_t begin = log.rfind('\n', at) == std::string::npos ? 0 : log.rfind('\n', at) + 1;
+    return log.substr(begin, log.find('\n', at) - begin);
+  };
+  const std::string listening = read_until("listening");
+  int port = 0;
+  ASSERT_TRUE(absl::SimpleAtoi(Field(listening, "port"), &port)) << log;
+  EXPECT_THAT(read_until("model_loaded"), HasSubstr("RPSRNet"));
+
+  testing::ServiceTestClient client(absl::StrCat("127.0.0.1:", port));
+  EXPECT_EQ(client.HealthStatus(""), 1);
+  grpc::ClientContext context;
+  client.Prepare(&context);
+  v1::ServerInfo info;
+  ASSERT_TRUE(client.stub().GetServerInfo(&context, {}, &info).ok());
+  EXPECT_EQ(info.limits().max_batch(), 4u);
+  EXPECT_EQ(info.limits().max_points_per_cloud(), 5000u);
+
+  ASSERT_EQ(kill(pid, SIGTERM), 0);
+  EXPECT_THAT(read_until("stopped"), HasSubstr("level=info"));
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  EXPECT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0) << log;
+  EXPECT_THAT(log, HasSubstr("event=signal signal=SIGTERM"));
+  EXPECT_THAT(log, HasSubstr("event=draining"));
+  EXPECT_THAT(log, HasSubstr("method=GetServerInfo code=OK"));
+  close(out[0]);
+}
+
+TEST(RpsrdTest, RefusesBadFlagsWithAReason) {
+  int out[2];
+  ASSERT_EQ(pipe(out), 0);
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    dup2(out[1], STDERR_FILENO);
+    close(out[0]);
+    execl(RPSRD_PATH, RPSRD_PATH, "--address=127.0.0.1:0", "--metrics_address=", "--max_batch=0",
+          static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  close(out[1]);
+  std::string log;
+  char buffer[4096];
+  for (ssize_t n; (n = read(out[0], buffer, sizeof(buffer))) > 0;) log.append(buffer, n);
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  EXPECT_EQ(WEXITSTATUS(status), 1);
+  EXPECT_THAT(log, HasSubstr("event=start_failed"));
+  EXPECT_THAT(log, HasSubstr("max_batch"));
+  close(out[0]);
+}
+
+}  // namespace
+}  // namespace rpsr::server
