@@ -367,8 +367,61 @@ Measurement MeasureInProcessBatcher(const core::Registrar& registrar, const Obje
   return measurement;
 }
 
+// Seconds per pair of each stage, the pairs registered one by one and as one batch (the network's
+// time of a batch is divided evenly among its pairs): where batching can help. Alternates the two
+// ways over 5 repeats (the first warms up) and prints the median of the repeats' means.
+void PrintStageTimes(const core::Registrar& registrar, const ObjectTrees& objects,
+                     const core::RegistrationOptions& options) {
+  const int pairs = static_cast<int>(objects.trees.size() / 2);
+  std::vector<core::RegistrationRequest> requests;
+  for (int k = 0; k < pairs; ++k) {
+    requests.push_back({&objects.trees[2 * k], &objects.trees[2 * k + 1], options});
+  }
+  // [way][stage] -> per-repeat means; stages: net, refine, confidence, total.
+  std::vector<double> means[2][4];
+  auto add = [&means, pairs](int way, const std::vector<core::RegistrationTimings>& timings) {
+    double sums[4] = {0, 0, 0, 0};
+    for (const auto& t : timings) {
+      sums[0] += t.net_seconds;
+      sums[1] += t.refine_seconds;
+      sums[2] += t.confidence_seconds;
+      sums[3] += t.total_seconds;
+    }
+    for (int stage = 0; stage < 4; ++stage) means[way][stage].push_back(sums[stage] / pairs);
+  };
+  for (int repeat = 0; repeat < 5; ++repeat) {
+    std::vector<core::RegistrationTimings> one_by_one;
+    for (const auto& request : requests) {
+      auto result = registrar.Register(*request.source, *request.target, options);
+      if (result.ok()) one_by_one.push_back(result->timings);
+    }
+    std::vector<core::RegistrationTimings> batched;
+    for (const auto& result : registrar.RegisterBatch(requests)) {
+      if (result.ok()) batched.push_back(result->timings);
+    }
+    if (repeat == 0) continue;
+    add(0, one_by_one);
+    add(1, batched);
+  }
+  for (int way = 0; way < 2; ++way) {
+    double median[4];
+    for (int stage = 0; stage < 4; ++stage) {
+      std::vector<double>& values = means[way][stage];
+      std::sort(values.begin(), values.end());
+      median[stage] = values[values.size() / 2];
+    }
+    std::printf(
+        "stage ms per pair (median of 4), %s: net %.2f, refine %.2f, confidence %.2f, "
+        "total %.2f\n",
+        way == 0 ? "one by one" : absl::StrCat("one batch of ", pairs).c_str(), 1e3 * median[0],
+        1e3 * median[1], 1e3 * median[2], 1e3 * median[3]);
+  }
+  std::fflush(stdout);
+}
+
 void RunInProcess(const core::Registrar& registrar, const ObjectTrees& objects,
                   std::vector<Row>* rows) {
+  PrintStageTimes(registrar, objects, OptionsFromFlags());
   const core::RegistrationOptions options = OptionsFromFlags();
   const int clients = absl::GetFlag(FLAGS_clients);
   for (int round = 1; round <= absl::GetFlag(FLAGS_rounds); ++round) {
