@@ -265,12 +265,17 @@ std::string MetricsJson(const core::KittiOdometryMetrics& metrics) {
                           per_length.empty() ? "" : ", ", length.length_m, length.segment_count,
                           length.translation_error_percent, length.rotation_error_deg_per_m);
   }
+  // No segment: the means do not exist (null), they are not zero.
+  auto number = [&metrics](double value) {
+    return metrics.segment_count > 0 ? absl::StrFormat("%.6g", value) : std::string("null");
+  };
   return absl::StrFormat(
-      "{\"segments\": %d, \"translation_error_percent\": %.6g, \"rotation_error_deg_per_m\": "
-      "%.6g, \"rotation_error_deg_per_100m\": %.6g, \"path_length_m\": %.3f, \"per_length\": "
+      "{\"segments\": %d, \"translation_error_percent\": %s, \"rotation_error_deg_per_m\": "
+      "%s, \"rotation_error_deg_per_100m\": %s, \"path_length_m\": %.3f, \"per_length\": "
       "[%s]}",
-      metrics.segment_count, metrics.translation_error_percent, metrics.rotation_error_deg_per_m,
-      100 * metrics.rotation_error_deg_per_m, metrics.path_length_m, per_length);
+      metrics.segment_count, number(metrics.translation_error_percent),
+      number(metrics.rotation_error_deg_per_m), number(100 * metrics.rotation_error_deg_per_m),
+      metrics.path_length_m, per_length);
 }
 
 }  // namespace

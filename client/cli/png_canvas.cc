@@ -204,11 +204,12 @@ absl::Status WriteTrajectoryPicture(const std::string& path,
   constexpr int kMargin = 20;
   PngCanvas canvas(size + 2 * kMargin, size + 2 * kMargin);
   const PlaneToPixels to_pixels(bounds, kMargin, kMargin, size, size);
-  auto draw_path = [&](const std::vector<Eigen::Isometry3d>& poses, Rgb colour) {
+  // The truth is drawn wider, so that it shows on both sides of an estimate that follows it.
+  auto draw_path = [&](const std::vector<Eigen::Isometry3d>& poses, Rgb colour, int thickness) {
     for (size_t i = 1; i < poses.size(); ++i) {
       const Eigen::Vector2d a = to_pixels(project(poses[i - 1]));
       const Eigen::Vector2d b = to_pixels(project(poses[i]));
-      canvas.DrawLine(a.x(), a.y(), b.x(), b.y(), colour, 2);
+      canvas.DrawLine(a.x(), a.y(), b.x(), b.y(), colour, thickness);
     }
     if (!poses.empty()) {
       const Eigen::Vector2d start = to_pixels(project(poses.front()));
@@ -217,8 +218,8 @@ absl::Status WriteTrajectoryPicture(const std::string& path,
       canvas.FillRectangle(x - 4, y - 4, x + 4, y + 4, colour);
     }
   };
-  draw_path(T_world_frame_truth, kTruthBlack);
-  draw_path(T_world_frame_estimate, kEstimateRed);
+  draw_path(T_world_frame_truth, kTruthBlack, 6);
+  draw_path(T_world_frame_estimate, kEstimateRed, 2);
   return canvas.WritePng(path);
 }
 
