@@ -21,11 +21,11 @@
 #include "absl/strings/str_format.h"
 #include "client/cli/cli_progress.h"
 #include "client/cli/registration_report.h"
+#include "client/cli/sample_pairs.h"
 #include "client/cli/service_flags.h"
 #include "client/cli/shared_flags.h"
 #include "client/cli/subcommands.h"
 #include "client/rpsr_client.h"
-#include "core/data/pair_manifest.h"
 #include "core/io/point_cloud_io.h"
 
 ABSL_FLAG(int, clients, 4, "bench: concurrent clients (threads, each with its own session)");
@@ -68,21 +68,23 @@ int RunBenchCommand(const std::vector<std::string>& args) {
   if (source_path.empty() != target_path.empty()) {
     return Fail(2, "give both --source and --target, or neither");
   }
+  core::PointCloud source_cloud;
+  core::PointCloud target_cloud;
   if (source_path.empty()) {
-    const std::string manifest =
-        (std::filesystem::path(absl::GetFlag(FLAGS_data)) / "object" / "manifest.csv").string();
-    absl::StatusOr<std::vector<core::ManifestRow>> rows = core::ReadPairManifest(manifest);
-    if (!rows.ok() || rows->empty()) {
-      return Fail(1, absl::StrCat("no sample pair: ",
-                                  rows.ok() ? manifest + " is empty" : rows.status().ToString()));
-    }
-    source_path = rows->front().source;
-    target_path = rows->front().target;
+    absl::StatusOr<SamplePair> pair = LoadSamplePair(absl::GetFlag(FLAGS_data), "object");
+    if (!pair.ok()) return Fail(1, absl::StrCat("no sample pair: ", pair.status().message()));
+    source_cloud = std::move(pair->source);
+    target_cloud = std::move(pair->target);
+  } else {
+    absl::StatusOr<core::PointCloud> read = core::ReadPointCloud(source_path);
+    if (!read.ok()) return Fail(1, std::string(read.status().message()));
+    source_cloud = *std::move(read);
+    read = core::ReadPointCloud(target_path);
+    if (!read.ok()) return Fail(1, std::string(read.status().message()));
+    target_cloud = *std::move(read);
   }
-  absl::StatusOr<core::PointCloud> source = core::ReadPointCloud(source_path);
-  if (!source.ok()) return Fail(1, std::string(source.status().message()));
-  absl::StatusOr<core::PointCloud> target = core::ReadPointCloud(target_path);
-  if (!target.ok()) return Fail(1, std::string(target.status().message()));
+  const core::PointCloud* source = &source_cloud;
+  const core::PointCloud* target = &target_cloud;
   absl::StatusOr<ClientOptions> client_options = ClientOptionsFromFlags();
   if (!client_options.ok()) return Fail(2, std::string(client_options.status().message()));
   // Retrying hides errors from the tally: a bench counts each answer as it comes.

@@ -15,12 +15,11 @@
 #include "absl/strings/str_cat.h"
 #include "client/cli/png_canvas.h"
 #include "client/cli/registration_report.h"
+#include "client/cli/sample_pairs.h"
 #include "client/cli/service_flags.h"
 #include "client/cli/shared_flags.h"
 #include "client/cli/subcommands.h"
 #include "client/rpsr_client.h"
-#include "core/data/pair_manifest.h"
-#include "core/io/point_cloud_io.h"
 #include "server/rpsr_server.h"
 
 namespace rpsr::client {
@@ -82,15 +81,10 @@ int RunDemoCommand(const std::vector<std::string>& args) {
   const std::string data = absl::GetFlag(FLAGS_data);
   std::string json_pairs;
   for (const Sample& sample : samples) {
-    const std::string manifest_path = (fs::path(data) / sample.folder / "manifest.csv").string();
-    absl::StatusOr<std::vector<core::ManifestRow>> rows = core::ReadPairManifest(manifest_path);
-    if (!rows.ok()) return Fail(1, std::string(rows.status().message()));
-    if (rows->empty()) return Fail(1, absl::StrCat(manifest_path, " lists no pair"));
-    const core::ManifestRow& row = rows->front();
-    absl::StatusOr<core::PointCloud> source = core::ReadPointCloud(row.source);
-    if (!source.ok()) return Fail(1, std::string(source.status().message()));
-    absl::StatusOr<core::PointCloud> target = core::ReadPointCloud(row.target);
-    if (!target.ok()) return Fail(1, std::string(target.status().message()));
+    absl::StatusOr<SamplePair> pair = LoadSamplePair(data, sample.folder);
+    if (!pair.ok()) return Fail(1, std::string(pair.status().message()));
+    const core::PointCloud* source = &pair->source;
+    const core::PointCloud* target = &pair->target;
 
     std::string why;
     const std::string mode =
@@ -115,7 +109,7 @@ int RunDemoCommand(const std::vector<std::string>& args) {
     report.iterations = result->iterations;
     report.mode = result->mode;
     report.seconds = result->round_trip_seconds;
-    report.truth = row.T_target_source;
+    report.truth = pair->T_target_source;
     const std::string picture = (fs::path(output) / sample.picture).string();
     if (absl::Status status = WritePairPicture(picture, *source, *target, result->T_target_source);
         !status.ok()) {
@@ -124,20 +118,22 @@ int RunDemoCommand(const std::vector<std::string>& args) {
     if (json) {
       absl::StrAppend(
           &json_pairs, json_pairs.empty() ? "" : ", ", "{\"name\": ", JsonString(sample.name),
-          ", \"source\": ", JsonString(row.source), ", \"target\": ", JsonString(row.target),
-          ", \"source_points\": ", source->size(), ", \"target_points\": ", target->size(),
+          ", \"source\": ", JsonString(pair->source_name),
+          ", \"target\": ", JsonString(pair->target_name), ", \"source_points\": ", source->size(),
+          ", \"target_points\": ", target->size(),
           ", \"tree_depth\": ", session_options.tree_max_depth,
           ", \"picture\": ", JsonString(picture), ", \"result\": ", FormatReportJson(report), "}");
     } else {
       std::printf("\n%s: %s (%zu points) -> %s (%zu points)\n", sample.name.c_str(),
-                  row.source.c_str(), source->size(), row.target.c_str(), target->size());
+                  pair->source_name.c_str(), source->size(), pair->target_name.c_str(),
+                  target->size());
       std::printf("tree depth %d, mode %s (%s)\n", session_options.tree_max_depth, mode.c_str(),
                   why.c_str());
       std::printf("%s", FormatReportText(report).c_str());
-      if (row.T_target_source) {
-        const Eigen::Vector3d t = row.T_target_source->translation();
+      if (pair->T_target_source) {
+        const Eigen::Vector3d t = pair->T_target_source->translation();
         std::printf("truth: rotation %.2f deg, t = % .4f % .4f % .4f\n",
-                    PoseErrorOf(Eigen::Isometry3d::Identity(), *row.T_target_source).rotation_deg,
+                    PoseErrorOf(Eigen::Isometry3d::Identity(), *pair->T_target_source).rotation_deg,
                     t.x(), t.y(), t.z());
       }
       std::printf(

@@ -18,8 +18,9 @@ ABSL_FLAG(std::string, tls_ca, "",
           "PEM file of the root certificates that signed the server's TLS certificate; given: "
           "connect with TLS");
 ABSL_FLAG(double, timeout_s, 60.0, "deadline of each call to the server, seconds");
-ABSL_FLAG(std::string, data, RPSR_EXAMPLES_DATA,
-          "demo, bench: the sample data folder (object/ and lidar/, each with a manifest.csv)");
+ABSL_FLAG(std::string, data, "",
+          "demo, bench: a folder of sample pairs laid out as client/examples/data (object/ and "
+          "lidar/, each with a manifest.csv); default: that folder's copy linked into rpsr");
 
 namespace rpsr::client {
 

@@ -259,8 +259,10 @@ TEST_F(ServiceEndToEndTest, DemoRegistersBothSamplesAgainstTheirTruth) {
   EXPECT_LT(JsonNumber(out_, "translation_error", lidar), 0.1) << out_;
   EXPECT_TRUE(fs::exists(output / "object_pair.png"));
   EXPECT_TRUE(fs::exists(output / "lidar_pair.png"));
-  // The text form says what it did.
-  ASSERT_EQ(Rpsr(absl::StrCat("demo --output ", output.string())), 0) << err_;
+  // The text form says what it did; --data reads the same pairs from the source tree instead of
+  // the copy linked into rpsr.
+  ASSERT_EQ(Rpsr(absl::StrCat("demo --output ", output.string(), " --data ", Data(""))), 0) << err_;
+  EXPECT_THAT(out_, HasSubstr(Data("object/clouds/000000_source.ply")));
   EXPECT_THAT(out_, HasSubstr("in-process server"));
   EXPECT_THAT(out_, HasSubstr("error vs truth"));
 }
