@@ -15,7 +15,7 @@ import path from "node:path";
 import { createRequire } from "node:module";
 
 const root = path.resolve(process.argv[2] ?? ".");
-const require = createRequire(path.join(process.env.RPSR_NODE_MODULES ?? root, "x.js"));
+const require = createRequire(path.resolve(process.env.RPSR_NODE_MODULES ?? root, "x.js"));
 const YAML = require("yaml");
 const modelsDir = path.dirname(require.resolve("kubernetes-models/package.json"));
 

@@ -7,7 +7,9 @@
 set -euo pipefail
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 root=$(cd "$here/../.." && pwd)
-prefix=${1:?usage: $0 BUILD_DIR}/deploy-node
+build_dir=${1:?usage: $0 BUILD_DIR}
+mkdir -p "$build_dir"
+prefix=$(cd "$build_dir" && pwd)/deploy-node
 for tool in node npm; do
   if ! command -v "$tool" >/dev/null; then
     echo "SKIP: $tool not installed (Node.js runs the Kubernetes schema check)"
