@@ -4,7 +4,9 @@
 // their own, without a metrics exposer (it takes a while to stop).
 #include "server/rpsr_server.h"
 
+#include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -304,6 +306,34 @@ TEST_F(ServerTest, TrackFollowsSimulatedLidarFrames) {
   stream->WritesDone();
   const grpc::Status status = stream->Finish();
   EXPECT_TRUE(status.ok()) << status.error_message();
+}
+
+TEST_F(ServerTest, UploadsA120kPointScanInChunks) {
+  core::LidarSequenceOptions options;
+  options.frame_count = 1;
+  options.seed = 7;
+  auto simulator = core::LidarSequenceSimulator::Create(options);
+  ASSERT_TRUE(simulator.ok()) << simulator.status();
+  const std::vector<Eigen::Vector3f> points = simulator->SimulateFrame(0).cloud.points;
+  ASSERT_GT(points.size(), 100'000u);
+  std::string lidar_session;
+  v1::SessionOptions session_options;
+  session_options.set_tree_max_depth(9);
+  ASSERT_TRUE(client_->CreateSession(&lidar_session, session_options).ok());
+  std::vector<double> walls;
+  for (int i = 0; i < 5; ++i) {
+    v1::UploadCloudResponse response;
+    const auto start = std::chrono::steady_clock::now();
+    ASSERT_TRUE(client_->Upload(lidar_session, points, &response, 65536).ok());
+    walls.push_back(
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+    EXPECT_EQ(response.tree().num_points(), points.size());
+    EXPECT_EQ(response.tree().max_depth(), 9);
+    std::printf("upload of %zu points (depth 9): %.1f ms wall, %.1f ms server tree build\n",
+                points.size(), 1e3 * walls.back(), 1e3 * response.tree().build_seconds());
+  }
+  std::sort(walls.begin(), walls.end());
+  std::printf("median upload: %.1f ms\n", 1e3 * walls[2]);
 }
 
 // --- bad input: each case its exact status code and a fragment of its message -----------------
