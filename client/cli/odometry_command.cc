@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <future>
 #include <optional>
 #include <string>
 #include <system_error>
@@ -127,11 +128,40 @@ absl::StatusOr<std::vector<double>> ParseLengths(const std::string& text) {
   return lengths;
 }
 
+// Reads frames one ahead on another thread, so that reading a scan overlaps the registration of
+// the previous one.
+class FrameReader {
+ public:
+  explicit FrameReader(const std::vector<std::string>& frames) : frames_(frames) { Prefetch(0); }
+  // Frame i (called with i = 0, 1, 2, ... in order).
+  absl::StatusOr<core::PointCloud> Next(size_t i) {
+    absl::StatusOr<core::PointCloud> cloud = next_.get();
+    if (!cloud.ok()) {
+      return absl::Status(cloud.status().code(),
+                          absl::StrCat(frames_[i], ": ", cloud.status().message()));
+    }
+    if (i + 1 < frames_.size()) Prefetch(i + 1);
+    return cloud;
+  }
+
+ private:
+  void Prefetch(size_t i) {
+    next_ =
+        std::async(std::launch::async, [path = frames_[i]] { return core::ReadPointCloud(path); });
+  }
+  const std::vector<std::string>& frames_;
+  std::future<absl::StatusOr<core::PointCloud>> next_;
+};
+
 // One frame's registration onto the previous one.
 struct Step {
   Eigen::Isometry3d T_previous_current = Eigen::Isometry3d::Identity();
   bool valid = false;
   double confidence = 0.0;
+  // Where the time of a frame went: the registrar's share, and (on a server) the whole round trip
+  // of the frame (upload, tree, registration, answer) as the client saw it.
+  double registrar_seconds = 0.0;
+  double round_trip_seconds = 0.0;
 };
 
 class FrameProgress {
@@ -160,13 +190,14 @@ absl::StatusOr<std::vector<Step>> RunLocally(const std::vector<std::string>& fra
       core::Registrar::Create(RegistrarConfigFromModelFlag(model_flag));
   if (!registrar.ok()) return registrar.status();
   std::vector<Step> steps;
-  absl::StatusOr<core::PointCloud> previous = core::ReadPointCloud(frames[0]);
+  FrameReader reader(frames);
+  absl::StatusOr<core::PointCloud> previous = reader.Next(0);
   if (!previous.ok()) return previous.status();
   std::optional<core::Octree> previous_tree;
   Eigen::Isometry3d motion = Eigen::Isometry3d::Identity();
   FrameProgress progress(static_cast<int>(frames.size()));
   for (size_t i = 1; i < frames.size(); ++i) {
-    absl::StatusOr<core::PointCloud> current = core::ReadPointCloud(frames[i]);
+    absl::StatusOr<core::PointCloud> current = reader.Next(i);
     if (!current.ok()) return current.status();
     const int depth = ChooseTreeDepth(*current, *previous, requested_depth);
     const std::string mode = ChooseMode(*current, *previous, requested_mode,
@@ -195,7 +226,8 @@ absl::StatusOr<std::vector<Step>> RunLocally(const std::vector<std::string>& fra
       return absl::Status(result.status().code(),
                           absl::StrCat("frame ", i, ": ", result.status().message()));
     }
-    steps.push_back({result->T_target_source, result->valid, result->confidence});
+    steps.push_back({result->T_target_source, result->valid, result->confidence,
+                     result->timings.total_seconds, 0.0});
     // An invalid step keeps the last good motion as the next start.
     if (result->valid) motion = result->T_target_source;
     previous = *std::move(current);
@@ -216,7 +248,8 @@ absl::StatusOr<std::vector<Step>> RunOnServer(const std::vector<std::string>& fr
   if (!client.ok()) return client.status();
   absl::StatusOr<ServerInfo> info = (*client)->GetServerInfo();
   if (!info.ok()) return info.status();
-  absl::StatusOr<core::PointCloud> first = core::ReadPointCloud(frames[0]);
+  FrameReader reader(frames);
+  absl::StatusOr<core::PointCloud> first = reader.Next(0);
   if (!first.ok()) return first.status();
   SessionOptions session_options;
   session_options.tree_max_depth = ChooseTreeDepth(*first, *first, requested_depth);
@@ -234,7 +267,7 @@ absl::StatusOr<std::vector<Step>> RunOnServer(const std::vector<std::string>& fr
   FrameProgress progress(static_cast<int>(frames.size()));
   for (size_t i = 0; i < frames.size(); ++i) {
     absl::StatusOr<core::PointCloud> cloud =
-        i == 0 ? absl::StatusOr<core::PointCloud>(*first) : core::ReadPointCloud(frames[i]);
+        i == 0 ? absl::StatusOr<core::PointCloud>(*std::move(first)) : reader.Next(i);
     if (!cloud.ok()) return cloud.status();
     absl::StatusOr<TrackedFrame> frame = (*tracker)->AddFrame(cloud->points);
     if (!frame.ok()) {
@@ -245,8 +278,9 @@ absl::StatusOr<std::vector<Step>> RunOnServer(const std::vector<std::string>& fr
       if (!frame->relative) {
         return absl::InternalError(absl::StrCat("frame ", i, ": the server sent no pose"));
       }
-      steps.push_back(
-          {frame->relative->T_target_source, frame->relative->valid, frame->relative->confidence});
+      steps.push_back({frame->relative->T_target_source, frame->relative->valid,
+                       frame->relative->confidence, frame->relative->timings.registrar_seconds,
+                       frame->round_trip_seconds});
     }
     if (!quiet) progress.Update(static_cast<int>(i + 1));
   }
@@ -326,9 +360,13 @@ int RunOdometryCommand(const std::vector<std::string>& args) {
   // LiDAR poses from the steps, then camera 0 poses when Tr is known (KITTI's convention).
   std::vector<Eigen::Isometry3d> T_world_lidar = {Eigen::Isometry3d::Identity()};
   int invalid = 0;
+  double registrar_seconds = 0.0;
+  double round_trip_seconds = 0.0;
   for (const Step& step : *steps) {
     T_world_lidar.push_back(T_world_lidar.back() * step.T_previous_current);
     if (!step.valid) ++invalid;
+    registrar_seconds += step.registrar_seconds;
+    round_trip_seconds += step.round_trip_seconds;
   }
   const GroundTruth truth = ReadGroundTruth(sequence_dir, frame_count);
   const std::vector<Eigen::Isometry3d> poses =
@@ -366,11 +404,13 @@ int RunOdometryCommand(const std::vector<std::string>& args) {
   if (json) {
     std::printf(
         "{\"sequence\": %s, \"where\": %s, \"frames\": %d, \"pairs\": %d, \"invalid_pairs\": %d, "
-        "\"seconds\": %.3f, \"ms_per_pair\": %.3f, \"poses\": %s, \"pose_frame\": %s, \"plot\": "
+        "\"seconds\": %.3f, \"ms_per_pair\": %.3f, \"registrar_ms_per_pair\": %.3f, "
+        "\"round_trip_ms_per_frame\": %.3f, \"poses\": %s, \"pose_frame\": %s, \"plot\": "
         "%s, \"metrics\": %s}\n",
         JsonString(sequence_dir.string()).c_str(),
         JsonString(*use_server ? absl::GetFlag(FLAGS_server) : "local").c_str(), frame_count, pairs,
-        invalid, seconds, 1e3 * seconds / pairs, JsonString(output).c_str(),
+        invalid, seconds, 1e3 * seconds / pairs, 1e3 * registrar_seconds / pairs,
+        1e3 * round_trip_seconds / pairs, JsonString(output).c_str(),
         JsonString(truth.T_camera_lidar ? "camera0" : "lidar").c_str(),
         JsonString(plot == "none" ? "" : plot).c_str(),
         metrics ? MetricsJson(*metrics).c_str() : "null");
@@ -378,8 +418,15 @@ int RunOdometryCommand(const std::vector<std::string>& args) {
   }
   std::printf("sequence %s: %d frames, %s\n", sequence_dir.string().c_str(), frame_count,
               *use_server ? ("server " + absl::GetFlag(FLAGS_server)).c_str() : "local");
-  std::printf("registered %d pairs in %.1f s (%.1f ms a pair), %d not valid\n", pairs, seconds,
-              1e3 * seconds / pairs, invalid);
+  std::printf(
+      "registered %d pairs in %.1f s (%.1f ms a pair, of which the registrar %.1f ms%s), "
+      "%d not valid\n",
+      pairs, seconds, 1e3 * seconds / pairs, 1e3 * registrar_seconds / pairs,
+      *use_server
+          ? absl::StrFormat("; %.1f ms a frame's round trip", 1e3 * round_trip_seconds / pairs)
+                .c_str()
+          : "",
+      invalid);
   std::printf("poses (%s, KITTI format) written to %s\n",
               truth.T_camera_lidar ? "camera 0 frame" : "LiDAR frame", output.c_str());
   if (metrics) {
