@@ -220,9 +220,14 @@ int RunCalibrateCommand(const std::vector<std::string>& /*args*/) {
   std::printf("fitted on: %s\n(in-sample; measure on held-out pairs with --evaluate)\n",
               set_description.c_str());
   PrintReports(reports);
-  const std::string comment = absl::StrCat("Fitted by `rpsr calibrate` on ", set_description,
-                                           ".\nIn-sample: ", ReportHeader(), "\n",
-                                           ReportRow("all", reports.front().second));
+  const std::string command = absl::StrFormat(
+      "rpsr calibrate --output %s --object_pairs %d --lidar_pairs %d --pair_seed %d%s", output,
+      options.object_pairs_per_setting, options.lidar_pairs_per_offset, options.seed,
+      absl::GetFlag(FLAGS_model).empty() ? "" : " --model " + absl::GetFlag(FLAGS_model));
+  const std::string comment =
+      absl::StrCat("Fitted by `", command, "`\non ", set_description,
+                   ".\nIn-sample: ", ReportHeader(), "\n", ReportRow("all", reports.front().second),
+                   "\nHeld-out figures: rpsr calibrate --evaluate (tests/bench/results/).");
   const std::filesystem::path parent = std::filesystem::path(output).parent_path();
   std::error_code ec;
   if (!parent.empty()) std::filesystem::create_directories(parent, ec);

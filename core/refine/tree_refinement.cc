@@ -245,7 +245,16 @@ struct Linearization {
   double used_count = 0.0;
   double inlier_sq_sum = 0.0;  // count-weighted squared plane distances
   int inlier_nodes = 0;
+  double robust_sum = 0.0;  // sum of the correspondences' robust weights
 };
+
+double FitnessOf(const Linearization& lin) {
+  return lin.used_count > 0 ? lin.inlier_count / lin.used_count : 0.0;
+}
+
+double InlierRmseOf(const Linearization& lin) {
+  return lin.inlier_count > 0 ? std::sqrt(lin.inlier_sq_sum / lin.inlier_count) : 0.0;
+}
 
 Linearization Linearize(const Octree& source, const Octree& target, DepthData& data,
                         const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
@@ -295,6 +304,7 @@ Linearization Linearize(const Octree& source, const Octree& target, DepthData& d
     const double e2 = r.dot(c.information * r);
     const double g = c2 / (c2 + e2);
     c.robust = g * g;
+    lin.robust_sum += c.robust;
     c.weight *= prior_scale * c.robust;
     weight_sum += c.weight;
     centroid += c.weight * c.target_mean;
@@ -527,6 +537,8 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
   result.T_target_source = MakeIsometry(R, t);
   result.converged = all_converged;
   AnalyseDegeneracy(final_lin, options, result);  // the finest depth's information
+  result.finest_fitness = FitnessOf(final_lin);
+  result.finest_inlier_rmse = InlierRmseOf(final_lin);
   // Fitness is measured where the source's cells hold surface patches rather than single
   // samples: at depths finer than the sampling, a node's partner is often more than a cell away
   // although the surfaces coincide, and the fraction would read as partial overlap.
@@ -543,10 +555,10 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
     final_lin = Linearize(source, target, data, R, t, options, corr);
   }
   result.inliers = final_lin.inlier_nodes;
-  result.fitness = final_lin.used_count > 0 ? final_lin.inlier_count / final_lin.used_count : 0.0;
-  result.inlier_rmse = final_lin.inlier_count > 0
-                           ? std::sqrt(final_lin.inlier_sq_sum / final_lin.inlier_count)
-                           : 0.0;
+  result.fitness = FitnessOf(final_lin);
+  result.inlier_rmse = InlierRmseOf(final_lin);
+  result.mean_robust_weight =
+      final_lin.correspondences > 0 ? final_lin.robust_sum / final_lin.correspondences : 0.0;
   if (result.fitness < options.min_fitness) {
     result.failure_reason =
         absl::StrCat("fitness ", result.fitness, " below min_fitness ", options.min_fitness,

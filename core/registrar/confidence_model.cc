@@ -5,6 +5,8 @@
 #include <string>
 #include <vector>
 
+#include "Eigen/Eigenvalues"
+#include "Eigen/LU"
 #include "absl/status/status.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
@@ -48,9 +50,16 @@ const std::vector<std::string>& ConfidenceFeatureNames() {
   static const auto* names = new std::vector<std::string>{
       "fitness",
       "inlier_rmse_cells",
+      "finest_fitness",
+      "finest_inlier_rmse_cells",
+      "mean_robust_weight",
       "log_min_eigenvalue",
+      "log_second_eigenvalue",
+      "log_rotation_std_deg",
+      "log_translation_std_rel",
       "converged",
       "iterations_per_depth",
+      "finest_iterations",
       "log_last_update_cells",
       "net_score_peak",
       "log_net_pass_change_deg",
@@ -74,7 +83,34 @@ std::vector<double> ConfidenceFeatureVector(const ConfidenceInputs& in) {
       2.0 * in.target->half_length() / static_cast<double>(uint64_t{1} << refined.fitness_depth);
   f[kFeatureFitness] = refined.fitness;
   f[kFeatureInlierRmseCells] = refined.inlier_rmse / std::max(fitness_edge, 1e-12);
+  const double finest_edge =
+      refined.stages.empty() ? fitness_edge : std::max(refined.stages.back().cell_edge, 1e-12);
+  f[kFeatureFinestFitness] = refined.finest_fitness;
+  f[kFeatureFinestInlierRmseCells] = refined.finest_inlier_rmse / finest_edge;
+  f[kFeatureMeanRobustWeight] = refined.mean_robust_weight;
+  f[kFeatureFinestIterations] = refined.stages.empty() ? 0.0 : refined.stages.back().iterations;
   f[kFeatureLogMinEigenvalue] = std::log10(std::max(refined.normalized_eigenvalues[0], 1e-6));
+  f[kFeatureLogSecondEigenvalue] = std::log10(std::max(refined.normalized_eigenvalues[1], 1e-6));
+  // The pose's standard errors as the information matrix predicts them (up to the residuals' true
+  // scale, which the regularised covariances only approximate).
+  const Eigen::Matrix<double, 6, 6>& H = refined.information;
+  const double trace = H.trace();
+  if (trace > 0 && H.allFinite()) {
+    Eigen::Matrix<double, 6, 6> damped = H;
+    damped.diagonal().array() += 1e-9 * trace;
+    const Eigen::Matrix<double, 6, 6> covariance = damped.inverse();
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> rotation(covariance.topLeftCorner<3, 3>());
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> translation(
+        covariance.bottomRightCorner<3, 3>());
+    const double rotation_std_deg =
+        std::sqrt(std::max(rotation.eigenvalues().maxCoeff(), 0.0)) * kRadToDeg;
+    const double translation_std = std::sqrt(std::max(translation.eigenvalues().maxCoeff(), 0.0));
+    f[kFeatureLogRotationStdDeg] = std::log10(std::max(rotation_std_deg, 1e-9));
+    f[kFeatureLogTranslationStdRel] = std::log10(std::max(translation_std / extent, 1e-12));
+  } else {
+    f[kFeatureLogRotationStdDeg] = 2.0;
+    f[kFeatureLogTranslationStdRel] = 0.0;
+  }
   f[kFeatureConverged] = refined.converged ? 1.0 : 0.0;
   f[kFeatureIterationsPerDepth] =
       refined.stages.empty()

@@ -37,9 +37,16 @@ namespace rpsr::core {
 enum ConfidenceFeature {
   kFeatureFitness,                 // overlap fraction at the fitness depth
   kFeatureInlierRmseCells,         // inlier RMSE / the fitness depth's cell edge
+  kFeatureFinestFitness,           // the same two at the finest depth
+  kFeatureFinestInlierRmseCells,   //
+  kFeatureMeanRobustWeight,        // mean robust weight of the fitness depth's correspondences
   kFeatureLogMinEigenvalue,        // log10 of the smallest normalised information eigenvalue
+  kFeatureLogSecondEigenvalue,     // log10 of the second smallest
+  kFeatureLogRotationStdDeg,       // log10 of the largest rotation std. dev. from information^-1
+  kFeatureLogTranslationStdRel,    // log10 of the largest translation std. dev. / extent
   kFeatureConverged,               // 1 when every depth met its epsilons
   kFeatureIterationsPerDepth,      // Gauss-Newton iterations per visited depth
+  kFeatureFinestIterations,        // Gauss-Newton iterations at the finest depth
   kFeatureLogLastUpdateCells,      // log10 of the finest depth's last update, in cells
   kFeatureNetScorePeak,            // the network's mean peak score (0 in mode refine)
   kFeatureLogNetPassChangeDeg,     // log10(1 + rotation change of the network's last pass, deg)

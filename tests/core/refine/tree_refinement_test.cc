@@ -225,6 +225,43 @@ TEST(TreeRefinementTest, DeterministicAndNeedsOnlyTrees) {
   EXPECT_EQ(a->information, b->information);
 }
 
+TEST(TreeRefinementTest, EvaluateOnlyMeasuresWithoutMoving) {
+  PairOptions pair_options;
+  pair_options.num_points = 2048;
+  auto pair = MakeObjectPair(pair_options, 5);
+  ASSERT_TRUE(pair.ok());
+  const Octree source = TreeOf(pair->source, 6);
+  const Octree target = TreeOf(pair->target, 6);
+  std::mt19937_64 rng(3);
+  const Eigen::Isometry3d initial = Perturbed(pair->T_target_source, 10 * kDeg, 0.05, rng);
+  auto refined = RefineOnTrees(source, target, initial);
+  ASSERT_TRUE(refined.ok());
+  TreeRefinementOptions measure;
+  measure.evaluate_only = true;
+  // At the refined pose: the same statistics as the refinement reported there.
+  auto at_refined = RefineOnTrees(source, target, refined->T_target_source, measure);
+  ASSERT_TRUE(at_refined.ok());
+  EXPECT_EQ(at_refined->T_target_source.matrix(), refined->T_target_source.matrix());
+  EXPECT_EQ(at_refined->iterations, 0);
+  EXPECT_FALSE(at_refined->converged);
+  EXPECT_EQ(at_refined->stages.size(), 1u);  // the finest depth only
+  EXPECT_EQ(at_refined->fitness_depth, refined->fitness_depth);
+  EXPECT_NEAR(at_refined->fitness, refined->fitness, 1e-9);
+  EXPECT_NEAR(at_refined->inlier_rmse, refined->inlier_rmse, 1e-9);
+  EXPECT_TRUE(at_refined->information.isApprox(refined->information, 1e-9));
+  EXPECT_TRUE(at_refined->valid);
+  // At the perturbed start: worse on every count, and not moved.
+  auto at_initial = RefineOnTrees(source, target, initial, measure);
+  ASSERT_TRUE(at_initial.ok());
+  EXPECT_EQ(at_initial->T_target_source.matrix(), initial.matrix());
+  EXPECT_LT(at_initial->fitness, refined->fitness);
+  // The refinement records its last update per stage; the finest one is tiny once converged.
+  ASSERT_FALSE(refined->stages.empty());
+  EXPECT_GT(refined->stages.front().last_update_rotation_rad, 0.0);
+  EXPECT_LT(refined->stages.back().last_update_translation,
+            1e-3 * refined->stages.back().cell_edge);
+}
+
 TEST(TreeRefinementTest, RejectsBadInputs) {
   const Octree tree = TreeOf(Sphere(500, 1), 5);
   EXPECT_EQ(RefineOnTrees(Octree(), tree, Eigen::Isometry3d::Identity()).status().code(),
@@ -245,6 +282,10 @@ TEST(TreeRefinementTest, RejectsBadInputs) {
   options.max_iterations_per_depth = 0;
   EXPECT_EQ(RefineOnTrees(tree, tree, Eigen::Isometry3d::Identity(), options).status().code(),
             absl::StatusCode::kInvalidArgument);
+  // ValidateTreeRefinement is the same check alone.
+  EXPECT_EQ(ValidateTreeRefinement(tree, tree, Eigen::Isometry3d::Identity(), options).code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_TRUE(ValidateTreeRefinement(tree, tree, Eigen::Isometry3d::Identity()).ok());
 }
 
 }  // namespace

@@ -1,0 +1,135 @@
+// The whole registration pipeline (issue 5), trees given, one thread: milliseconds per pair of
+// Registrar::Register for 2,048-point object pairs (trees to depth 6) and 120k-point simulated
+// LiDAR pairs five frames apart (trees to depth 9, ~0.5 m cells), in each mode, and per stage
+// (network, refinement, confidence) as counters. The issue's goal for net+refine: at most 10 ms
+// for objects and 25 ms for LiDAR scans.
+//
+//   OMP_WAIT_POLICY=PASSIVE build/tests/bench/registrar_bench --benchmark_counters_tabular=true
+#include <cstdlib>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "benchmark/benchmark.h"
+#include "core/data/object_pairs.h"
+#include "core/net/rpsr_net.h"
+#include "core/registrar/registrar.h"
+#include "core/synth/lidar_sequence.h"
+
+namespace rpsr::core {
+namespace {
+
+const Registrar& SharedRegistrar() {
+  static const Registrar* registrar = [] {
+    SetNetThreads(1);
+    auto created = Registrar::Create();
+    if (!created.ok()) std::abort();
+    return created->release();
+  }();
+  return *registrar;
+}
+
+struct TreePairs {
+  std::vector<Octree> trees;  // source, target, source, target, ...
+  size_t size() const { return trees.size() / 2; }
+};
+
+Octree TreeOf(const PointCloud& cloud, int max_depth) {
+  BarnesHutTreeOptions options;
+  options.max_depth = max_depth;
+  auto tree = BuildOctree(cloud, options);
+  if (!tree.ok()) std::abort();
+  return *std::move(tree);
+}
+
+const TreePairs& ObjectTrees() {
+  static const TreePairs* pairs = [] {
+    auto* out = new TreePairs;
+    PairOptions options;
+    options.num_points = 2048;
+    options.split = ObjectSplit::kM2Unseen;
+    for (int i = 0; i < 16; ++i) {
+      auto pair = MakeObjectPair(options, 100 + i);
+      if (!pair.ok()) std::abort();
+      out->trees.push_back(TreeOf(pair->source, 6));
+      out->trees.push_back(TreeOf(pair->target, 6));
+    }
+    return out;
+  }();
+  return *pairs;
+}
+
+PointCloud Thinned(const PointCloud& full, size_t num_points) {
+  if (full.size() < num_points) return full;
+  PointCloud cloud;
+  for (size_t i = 0; i < num_points; ++i) {
+    cloud.points.push_back(full.points[i * full.size() / num_points]);
+  }
+  return cloud;
+}
+
+const TreePairs& LidarTrees() {
+  static const TreePairs* pairs = [] {
+    auto* out = new TreePairs;
+    LidarSequenceOptions options;
+    options.frame_count = 40;
+    options.seed = 1;
+    options.sensor.azimuth_steps = 2400;  // ~140k points, thinned to 120k
+    auto simulator = LidarSequenceSimulator::Create(options);
+    if (!simulator.ok()) std::abort();
+    for (int i = 0; i < 4; ++i) {
+      out->trees.push_back(TreeOf(Thinned(simulator->SimulateFrame(5 * i).cloud, 120000), 9));
+      out->trees.push_back(TreeOf(Thinned(simulator->SimulateFrame(5 * i + 5).cloud, 120000), 9));
+    }
+    return out;
+  }();
+  return *pairs;
+}
+
+void RunRegister(benchmark::State& state, const TreePairs& trees) {
+  const Registrar& registrar = SharedRegistrar();
+  RegistrationOptions options;
+  options.mode = static_cast<RegistrationMode>(state.range(0));
+  size_t k = 0;
+  double net = 0.0, refine = 0.0, confidence = 0.0, valid = 0.0;
+  for (auto _ : state) {
+    const size_t i = k++ % trees.size();
+    auto result = registrar.Register(trees.trees[2 * i], trees.trees[2 * i + 1], options);
+    if (!result.ok()) {
+      state.SkipWithError("register failed");
+      break;
+    }
+    net += result->timings.net_seconds;
+    refine += result->timings.refine_seconds;
+    confidence += result->timings.confidence_seconds;
+    valid += result->valid;
+    benchmark::DoNotOptimize(result);
+  }
+  const double n = static_cast<double>(std::max<int64_t>(1, state.iterations()));
+  state.counters["net_ms"] = 1e3 * net / n;
+  state.counters["refine_ms"] = 1e3 * refine / n;
+  state.counters["confidence_ms"] = 1e3 * confidence / n;
+  state.counters["valid"] = valid / n;
+  state.SetLabel(std::string(RegistrationModeName(options.mode)));
+}
+
+void BM_RegisterObjects(benchmark::State& state) { RunRegister(state, ObjectTrees()); }
+BENCHMARK(BM_RegisterObjects)
+    ->ArgName("mode")
+    ->Arg(static_cast<int>(RegistrationMode::kNetRefine))
+    ->Arg(static_cast<int>(RegistrationMode::kNet))
+    ->Arg(static_cast<int>(RegistrationMode::kRefine))
+    ->Unit(benchmark::kMillisecond);
+
+void BM_RegisterLidar(benchmark::State& state) { RunRegister(state, LidarTrees()); }
+BENCHMARK(BM_RegisterLidar)
+    ->ArgName("mode")
+    ->Arg(static_cast<int>(RegistrationMode::kNetRefine))
+    ->Arg(static_cast<int>(RegistrationMode::kNet))
+    ->Arg(static_cast<int>(RegistrationMode::kRefine))
+    ->Unit(benchmark::kMillisecond);
+
+}  // namespace
+}  // namespace rpsr::core
+
+BENCHMARK_MAIN();
