@@ -32,26 +32,48 @@ absl::Status AppendXyz(absl::string_view xyz, uint64_t first_index,
                      " bytes of points is not a whole number of points (12 bytes "
                      "each: little-endian float32 x, y, z)"));
   }
+  static_assert(sizeof(Eigen::Vector3f) == kBytesPerPoint, "Vector3f must be 3 packed floats");
   const size_t count = xyz.size() / kBytesPerPoint;
-  const char* bytes = xyz.data();
-  for (size_t i = 0; i < count; ++i, bytes += kBytesPerPoint) {
-    const Eigen::Vector3f p(LoadLittleEndianFloat(bytes), LoadLittleEndianFloat(bytes + 4),
-                            LoadLittleEndianFloat(bytes + 8));
-    if (!p.allFinite()) {
-      return absl::InvalidArgumentError(absl::StrCat("point ", first_index + i,
-                                                     " has a non-finite coordinate (", p.x(), ", ",
-                                                     p.y(), ", ", p.z(), ")"));
+  const size_t old_size = points->size();
+  points->resize(old_size + count);
+  Eigen::Vector3f* out = points->data() + old_size;
+  if constexpr (std::endian::native == std::endian::little) {
+    // The wire layout is the memory layout: one copy (a 120k-point scan in well under 1 ms).
+    std::memcpy(static_cast<void*>(out), xyz.data(), xyz.size());
+  } else {
+    const char* bytes = xyz.data();
+    for (size_t i = 0; i < count; ++i, bytes += kBytesPerPoint) {
+      out[i] = Eigen::Vector3f(LoadLittleEndianFloat(bytes), LoadLittleEndianFloat(bytes + 4),
+                               LoadLittleEndianFloat(bytes + 8));
     }
-    points->push_back(p);
+  }
+  // Finite check after the copy, in one pass over the floats; the first offender is named.
+  const float* values = out->data();
+  bool all_finite = true;
+  for (size_t i = 0; i < 3 * count; ++i) all_finite &= std::isfinite(values[i]);
+  if (!all_finite) {
+    for (size_t i = 0; i < count; ++i) {
+      if (!out[i].allFinite()) {
+        const Eigen::Vector3f p = out[i];
+        points->resize(old_size);
+        return absl::InvalidArgumentError(absl::StrCat("point ", first_index + i,
+                                                       " has a non-finite coordinate (", p.x(),
+                                                       ", ", p.y(), ", ", p.z(), ")"));
+      }
+    }
   }
   return absl::OkStatus();
 }
 
 std::string EncodeXyz(const std::vector<Eigen::Vector3f>& points) {
   std::string bytes(points.size() * kBytesPerPoint, '\0');
-  char* out = bytes.data();
-  for (const Eigen::Vector3f& p : points) {
-    for (int a = 0; a < 3; ++a, out += 4) StoreLittleEndianFloat(p[a], out);
+  if constexpr (std::endian::native == std::endian::little) {
+    std::memcpy(bytes.data(), static_cast<const void*>(points.data()), bytes.size());
+  } else {
+    char* out = bytes.data();
+    for (const Eigen::Vector3f& p : points) {
+      for (int a = 0; a < 3; ++a, out += 4) StoreLittleEndianFloat(p[a], out);
+    }
   }
   return bytes;
 }

@@ -48,23 +48,21 @@ grpc::Status ServiceTestClient::CreateSession(std::string* session_id,
 std::vector<v1::UploadCloudRequest> UploadMessagesFor(const std::string& session_id,
                                                       const std::vector<Eigen::Vector3f>& points,
                                                       size_t chunk_points) {
+  const std::string bytes = EncodeXyz(points);
+  const size_t chunk_bytes = chunk_points * kBytesPerPoint;
   std::vector<v1::UploadCloudRequest> messages;
-  for (size_t begin = 0, sequence = 0; begin < points.size() || sequence == 0;
-       begin += chunk_points, ++sequence) {
+  size_t begin = 0;
+  do {
     v1::UploadCloudRequest message;
-    if (sequence == 0) {
+    if (messages.empty()) {
       message.set_session_id(session_id);
       message.set_point_count(points.size());
     }
-    message.set_sequence(static_cast<uint32_t>(sequence));
-    const size_t end = std::min(points.size(), begin + chunk_points);
-    if (begin < end) {
-      message.set_xyz(
-          EncodeXyz(std::vector<Eigen::Vector3f>(points.begin() + begin, points.begin() + end)));
-    }
+    message.set_sequence(static_cast<uint32_t>(messages.size()));
+    message.set_xyz(bytes.substr(begin, chunk_bytes));
     messages.push_back(std::move(message));
-    if (end >= points.size()) break;
-  }
+    begin += chunk_bytes;
+  } while (begin < bytes.size());
   return messages;
 }
 
