@@ -1,8 +1,8 @@
 // The rpsr client library in a few lines: connect, open a session, upload two clouds, register.
 //
 //   rpsr_register_example ADDRESS SOURCE_FILE TARGET_FILE
-//   rpsr_register_example 127.0.0.1:50051 client/examples/data/object_source.ply \
-//       client/examples/data/object_target.ply
+//   rpsr_register_example 127.0.0.1:50051 client/examples/data/object/clouds/000000_source.ply
+//                         client/examples/data/object/clouds/000000_target.ply  (one line)
 //
 // Prints the pose T_target_source (maps source points into the target frame), whether it is
 // valid and its confidence. Exit code 0 on a valid registration, 1 otherwise.

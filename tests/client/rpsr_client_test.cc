@@ -9,7 +9,10 @@
 
 #include <chrono>
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <future>
+#include <iterator>
 #include <string>
 #include <thread>
 #include <vector>
@@ -67,6 +70,22 @@ int FreePort() {
   return ntohs(address.sin_port);
 }
 
+// Options with the fields a test sets (designated initializers would leave -Wextra's
+// missing-field-initializers warnings).
+ClientOptions At(const std::string& address, const std::string& token = "") {
+  ClientOptions options;
+  options.address = address;
+  options.bearer_token = token;
+  return options;
+}
+
+SessionOptions TreeDepth(int depth, bool keep_points_for_reupload = true) {
+  SessionOptions options;
+  options.tree_max_depth = depth;
+  options.keep_points_for_reupload = keep_points_for_reupload;
+  return options;
+}
+
 class RpsrClientTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
@@ -110,7 +129,7 @@ TEST_F(RpsrClientTest, UploadsInChunksAndRegistersByIds) {
   ClientOptions options;
   options.chunk_points = 100;  // 1,024 points: 11 messages
   std::unique_ptr<Client> client = Connect(options);
-  absl::StatusOr<std::unique_ptr<Session>> session = client->CreateSession({.tree_max_depth = 6});
+  absl::StatusOr<std::unique_ptr<Session>> session = client->CreateSession(TreeDepth(6));
   ASSERT_TRUE(session.ok()) << session.status();
   EXPECT_EQ((*session)->options().tree_max_depth, 6);
   absl::StatusOr<UploadedCloud> source = (*session)->Upload(object_->source.points);
@@ -190,7 +209,7 @@ TEST_F(RpsrClientTest, BadCloudsGetTheServersMessage) {
 TEST_F(RpsrClientTest, TrackerComposesRelativePoses) {
   const SamplePair lidar = LoadSample("lidar");
   std::unique_ptr<Client> client = Connect();
-  absl::StatusOr<std::unique_ptr<Session>> session = client->CreateSession({.tree_max_depth = 9});
+  absl::StatusOr<std::unique_ptr<Session>> session = client->CreateSession(TreeDepth(9));
   ASSERT_TRUE(session.ok()) << session.status();
   TrackerOptions options;
   options.registration.mode = "refine";
@@ -221,13 +240,12 @@ TEST(RpsrClientRecoveryTest, EvictedCloudsAreUploadedAgain) {
   options.cache.memory_budget_bytes = 700'000;
   absl::StatusOr<std::unique_ptr<server::RunningServer>> running = server::StartServer(options);
   ASSERT_TRUE(running.ok()) << running.status();
-  absl::StatusOr<std::unique_ptr<Client>> client =
-      Client::Connect({.address = (*running)->target()});
+  absl::StatusOr<std::unique_ptr<Client>> client = Client::Connect(At((*running)->target()));
   ASSERT_TRUE(client.ok());
   for (bool keep_points : {true, false}) {
     SCOPED_TRACE(keep_points ? "points kept" : "points not kept");
     absl::StatusOr<std::unique_ptr<Session>> session =
-        (*client)->CreateSession({.tree_max_depth = 6, .keep_points_for_reupload = keep_points});
+        (*client)->CreateSession(TreeDepth(6, keep_points));
     ASSERT_TRUE(session.ok()) << session.status();
     absl::StatusOr<UploadedCloud> source = (*session)->Upload(object.source.points);
     absl::StatusOr<UploadedCloud> target = (*session)->Upload(object.target.points);
@@ -283,23 +301,56 @@ TEST(RpsrClientRecoveryTest, BearerTokenIsSentAndChecked) {
   options.auth_tokens = {"s3cret"};
   absl::StatusOr<std::unique_ptr<server::RunningServer>> running = server::StartServer(options);
   ASSERT_TRUE(running.ok()) << running.status();
-  absl::StatusOr<std::unique_ptr<Client>> anonymous =
-      Client::Connect({.address = (*running)->target()});
+  absl::StatusOr<std::unique_ptr<Client>> anonymous = Client::Connect(At((*running)->target()));
   ASSERT_TRUE(anonymous.ok());
   EXPECT_EQ((*anonymous)->CreateSession().status().code(), absl::StatusCode::kUnauthenticated);
   absl::StatusOr<std::unique_ptr<Client>> wrong =
-      Client::Connect({.address = (*running)->target(), .bearer_token = "guess"});
+      Client::Connect(At((*running)->target(), "guess"));
   ASSERT_TRUE(wrong.ok());
   EXPECT_EQ((*wrong)->CreateSession().status().code(), absl::StatusCode::kUnauthenticated);
   absl::StatusOr<std::unique_ptr<Client>> trusted =
-      Client::Connect({.address = (*running)->target(), .bearer_token = "s3cret"});
+      Client::Connect(At((*running)->target(), "s3cret"));
   ASSERT_TRUE(trusted.ok());
   absl::StatusOr<std::unique_ptr<Session>> session = (*trusted)->CreateSession();
   EXPECT_TRUE(session.ok()) << session.status();
 }
 
+TEST(RpsrClientRecoveryTest, ConnectsOverTlsWithTheServersRoot) {
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / absl::StrCat("rpsr_client_tls_", getpid());
+  std::filesystem::create_directories(dir);
+  const std::string cert = (dir / "cert.pem").string();
+  const std::string key = (dir / "key.pem").string();
+  const std::string command = absl::StrCat(
+      "openssl req -x509 -newkey rsa:2048 -nodes -days 2 -subj /CN=localhost "
+      "-addext subjectAltName=DNS:localhost,IP:127.0.0.1 -keyout ",
+      key, " -out ", cert, " >/dev/null 2>&1");
+  if (std::system(command.c_str()) != 0) GTEST_SKIP() << "openssl could not make a certificate";
+  server::ServerOptions options = TestServerOptions();
+  options.tls_cert_file = cert;
+  options.tls_key_file = key;
+  absl::StatusOr<std::unique_ptr<server::RunningServer>> running = server::StartServer(options);
+  ASSERT_TRUE(running.ok()) << running.status();
+  std::ifstream in(cert);
+  const std::string root((std::istreambuf_iterator<char>(in)), {});
+  ClientOptions tls = At((*running)->target());
+  tls.use_tls = true;
+  tls.tls_root_certs_pem = root;
+  absl::StatusOr<std::unique_ptr<Client>> secure = Client::Connect(tls);
+  ASSERT_TRUE(secure.ok());
+  absl::StatusOr<ServerInfo> info = (*secure)->GetServerInfo();
+  EXPECT_TRUE(info.ok()) << info.status();
+  // Plaintext cannot talk to it (and is not retried for ever: UNAVAILABLE after the attempts).
+  ClientOptions plaintext = At((*running)->target());
+  plaintext.retry.max_attempts = 1;
+  absl::StatusOr<std::unique_ptr<Client>> plain = Client::Connect(plaintext);
+  ASSERT_TRUE(plain.ok());
+  EXPECT_EQ((*plain)->GetServerInfo().status().code(), absl::StatusCode::kUnavailable);
+  std::filesystem::remove_all(dir);
+}
+
 TEST(RpsrClientOptionsTest, ConnectRejectsBadOptions) {
-  EXPECT_EQ(Client::Connect({.address = ""}).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(Client::Connect(At("")).status().code(), absl::StatusCode::kInvalidArgument);
   ClientOptions options;
   options.retry.max_attempts = 0;
   EXPECT_EQ(Client::Connect(options).status().code(), absl::StatusCode::kInvalidArgument);
