@@ -101,7 +101,7 @@ absl::StatusOr<std::vector<std::string>> ReadTokens(const std::string& path) {
 
 int main(int argc, char** argv) {
   absl::SetProgramUsageMessage(
-      "rpsrd: the rpsr registration service (gRPC rpsr.v1.RegistrationService).\n"
+      "the rpsr registration service (gRPC rpsr.v1.RegistrationService).\n"
       "  rpsrd [--address 0.0.0.0:50051] [--metrics_address 0.0.0.0:9464] [flags]");
   absl::ParseCommandLine(argc, argv);
 
