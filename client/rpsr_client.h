@@ -65,8 +65,11 @@ struct ClientOptions {
   // Deadline of each call (an upload's or a Track stream's whole life counts as one call for
   // Upload; a Tracker's stream has none). Per-call overrides: RegisterOptions::timeout.
   absl::Duration default_deadline = absl::Seconds(60);
-  // HTTP/2 keepalive pings on an idle connection; zero: none.
-  absl::Duration keepalive_time = absl::Seconds(30);
+  // HTTP/2 keepalive pings while calls are open (e.g. a quiet Track stream), so a dead peer or
+  // a silently dropped connection is noticed; zero: none. A gRPC server refuses pings more often
+  // than its GRPC_ARG_HTTP2_MIN_RECV_PING_INTERVAL_WITHOUT_DATA_MS (5 minutes by default) and
+  // closes the connection ("too_many_pings"), hence this default.
+  absl::Duration keepalive_time = absl::Minutes(5);
   absl::Duration keepalive_timeout = absl::Seconds(10);
   // Points per upload message; 0: 65,536 (768 KiB, well under the default 4 MiB limit).
   uint64_t chunk_points = 0;
