@@ -183,6 +183,12 @@ class ServerState {
     } else {
       loader_ = std::thread([this] { LoadModel().IgnoreError(); });
     }
+    if (!options_.auth_tokens.empty() && options_.tls_cert_file.empty()) {
+      // Bearer tokens over plaintext can be read by anyone on the path: say so once.
+      LogEvent(
+          "warn", "auth_without_tls",
+          {{"detail", "bearer tokens travel in plaintext; enable TLS or terminate it in front"}});
+    }
     if (options_.log_requests) {
       LogEvent("info", "listening",
                {{"address", options_.address},
