@@ -84,7 +84,7 @@ for needed in "${!candidates_of[@]}"; do
   packages+=("$pkg")
 done
 # libblas.so.3 resolves to whichever BLAS the alternatives chose; the image must get OpenBLAS
-# (with the reference BLAS LibTorch's GEMMs run ~14x slower: ../shared DEPS).
+# (with the reference BLAS, LibTorch's GEMMs ran ~14x slower here).
 packages+=(libopenblas0-openmp ca-certificates python3-grpcio)
 printf '%s\n' "${packages[@]}" | sort -u >"$dest/usr/local/share/rpsr/runtime-packages.txt"
 echo "stage_runtime.sh: staged $(ls "$dest/usr/local/bin" | wc -l) binaries," \
