@@ -1,5 +1,6 @@
 #include "server/cloud_assembler.h"
 
+#include <algorithm>
 #include <bit>
 #include <cmath>
 #include <cstring>
@@ -96,7 +97,9 @@ absl::Status CloudAssembler::Begin(uint64_t point_count) {
   }
   begun_ = true;
   expected_ = point_count;
-  points_.reserve(point_count);
+  // Memory follows the points that actually arrive, not the count a client declares (a client
+  // declaring 2M points and sending none must not cost 24 MB).
+  points_.reserve(std::min<uint64_t>(point_count, 65536));
   return absl::OkStatus();
 }
 

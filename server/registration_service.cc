@@ -93,6 +93,19 @@ struct RegistrationService::Shared {
   std::unique_ptr<RegistrationBatcher> owned_batcher ABSL_GUARDED_BY(engine_mu);
   std::atomic<RegistrationBatcher*> batcher{nullptr};
   std::atomic<bool> draining{false};
+  std::atomic<uint32_t> open_streams{0};
+
+  // Takes a slot for an UploadCloud or Track stream (released by ReleaseStream in OnDone).
+  absl::Status AcquireStream() {
+    if (open_streams.fetch_add(1) >= options.max_open_streams) {
+      open_streams.fetch_sub(1);
+      return absl::ResourceExhaustedError(
+          absl::StrCat("the server has the most upload and track streams open it may (",
+                       options.max_open_streams, "); retry shortly"));
+    }
+    return absl::OkStatus();
+  }
+  void ReleaseStream() { open_streams.fetch_sub(1); }
 
   // Refuses calls while draining, and calls that need the model before it is loaded.
   absl::Status Admit(bool needs_model) const {
@@ -375,6 +388,12 @@ class UploadReactor final : public grpc::ServerReadReactor<v1::UploadCloudReques
       FinishOnce(caller.status());
       return;
     }
+    absl::Status slot = shared_->AcquireStream();
+    if (!slot.ok()) {
+      FinishOnce(slot);
+      return;
+    }
+    holds_stream_ = true;
     caller_ = *std::move(caller);
     StartRead(&message_);
   }
@@ -398,7 +417,10 @@ class UploadReactor final : public grpc::ServerReadReactor<v1::UploadCloudReques
   }
 
   void OnCancel() override { cancelled_.store(true); }
-  void OnDone() override { delete this; }
+  void OnDone() override {
+    if (holds_stream_) shared_->ReleaseStream();
+    delete this;
+  }
 
  private:
   absl::Status Accept() {
@@ -467,6 +489,7 @@ class UploadReactor final : public grpc::ServerReadReactor<v1::UploadCloudReques
   CloudAssembler assembler_;
   v1::UploadCloudRequest message_;
   std::atomic<bool> cancelled_{false};
+  bool holds_stream_ = false;
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -486,6 +509,12 @@ class TrackReactor final : public grpc::ServerBidiReactor<v1::TrackRequest, v1::
       FinishOnce(caller.status());
       return;
     }
+    absl::Status slot = shared_->AcquireStream();
+    if (!slot.ok()) {
+      FinishOnce(slot);
+      return;
+    }
+    holds_stream_ = true;
     caller_ = *std::move(caller);
     settings_ = shared_->DefaultSettings();
     StartRead(&request_);
@@ -518,7 +547,10 @@ class TrackReactor final : public grpc::ServerBidiReactor<v1::TrackRequest, v1::
   }
 
   void OnCancel() override { cancelled_->store(true); }
-  void OnDone() override { delete this; }
+  void OnDone() override {
+    if (holds_stream_) shared_->ReleaseStream();
+    delete this;
+  }
 
  private:
   // One message; reads the next one unless a frame went off to be registered (or failed).
@@ -666,6 +698,7 @@ class TrackReactor final : public grpc::ServerBidiReactor<v1::TrackRequest, v1::
   v1::TrackRequest request_;
   v1::TrackResponse response_;
   std::shared_ptr<std::atomic<bool>> cancelled_ = std::make_shared<std::atomic<bool>>(false);
+  bool holds_stream_ = false;
 };
 
 // Runs a short synchronous unary handler on the call's default reactor.

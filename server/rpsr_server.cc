@@ -51,6 +51,7 @@ absl::Status ValidateOptions(const ServerOptions& o) {
         "max_queue_delay >= 0");
   }
   if (o.max_points_per_cloud == 0) return invalid("max_points_per_cloud is 0");
+  if (o.max_open_streams == 0) return invalid("max_open_streams is 0");
   if (o.max_message_bytes < 1024 || o.max_message_bytes > (1u << 31) - 1) {
     return invalid("max_message_bytes must be in [1024, 2^31 - 1], got ", o.max_message_bytes);
   }

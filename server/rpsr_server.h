@@ -60,6 +60,9 @@ struct ServerOptions {
   // Input limits.
   uint64_t max_points_per_cloud = 2'000'000;
   uint64_t max_inline_points = 16'384;  // per inline cloud of Register
+  // UploadCloud and Track streams open at once; one more is RESOURCE_EXHAUSTED. Each holds up to
+  // max_points_per_cloud points while a cloud arrives, so this bounds that memory.
+  uint32_t max_open_streams = 256;
   // Largest gRPC message received, bytes (the default gRPC limit is 4 MiB; upload in chunks).
   uint64_t max_message_bytes = 4u << 20;
   // Tree depth of sessions that ask for none, and the range a session may ask for.

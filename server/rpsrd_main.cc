@@ -60,6 +60,8 @@ ABSL_FLAG(uint64_t, max_points_per_cloud, kDefaults.max_points_per_cloud,
           "Most points in one uploaded cloud or Track frame");
 ABSL_FLAG(uint64_t, max_inline_points, kDefaults.max_inline_points,
           "Most points of a cloud sent inline in Register");
+ABSL_FLAG(uint32_t, max_open_streams, kDefaults.max_open_streams,
+          "UploadCloud and Track streams open at once");
 ABSL_FLAG(uint64_t, max_message_bytes, kDefaults.max_message_bytes,
           "Largest gRPC message received, bytes");
 ABSL_FLAG(int, default_tree_depth, kDefaults.default_tree_max_depth,
@@ -131,6 +133,7 @@ int main(int argc, char** argv) {
   options.batching.intra_op_threads = absl::GetFlag(FLAGS_intra_op_threads);
   options.max_points_per_cloud = absl::GetFlag(FLAGS_max_points_per_cloud);
   options.max_inline_points = absl::GetFlag(FLAGS_max_inline_points);
+  options.max_open_streams = absl::GetFlag(FLAGS_max_open_streams);
   options.max_message_bytes = absl::GetFlag(FLAGS_max_message_bytes);
   options.default_tree_max_depth = absl::GetFlag(FLAGS_default_tree_depth);
   options.min_tree_max_depth = absl::GetFlag(FLAGS_min_tree_depth);

@@ -711,6 +711,44 @@ TEST(ServerLimitsTest, ExpiredAndCancelledRequestsLeaveTheQueueUnrun) {
   server->Shutdown(absl::Seconds(5));
 }
 
+TEST(ServerLimitsTest, OpenStreamsAreBoundedAndTheirSlotsComeBack) {
+  ServerOptions options = TestOptions();
+  options.max_open_streams = 1;
+  auto server = Start(options);
+  ASSERT_NE(server, nullptr);
+  ServiceTestClient client(server->target());
+  std::string session;
+  ASSERT_TRUE(client.CreateSession(&session).ok());
+  v1::UploadCloudResponse response;
+  {
+    grpc::ClientContext context;
+    client.Prepare(&context);
+    auto track = client.stub().Track(&context);
+    v1::TrackRequest start;
+    start.mutable_start()->set_session_id(session);
+    ASSERT_TRUE(track->Write(start));
+    // The Track stream holds the only slot (its start was read, so the server has opened it).
+    grpc::Status refused;
+    for (int i = 0; i < 100; ++i) {
+      refused = client.Upload(session, SmallCloud(), &response);
+      if (!refused.ok()) break;
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    EXPECT_CODE(refused, RESOURCE_EXHAUSTED, "upload and track streams open");
+    track->WritesDone();
+    EXPECT_TRUE(track->Finish().ok());
+  }
+  // Closed streams give their slot back.
+  grpc::Status accepted;
+  for (int i = 0; i < 100; ++i) {
+    accepted = client.Upload(session, SmallCloud(), &response);
+    if (accepted.ok()) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  EXPECT_TRUE(accepted.ok()) << accepted.error_message();
+  server->Shutdown(absl::Seconds(5));
+}
+
 TEST(ServerAuthTest, BearerTokensAuthenticateAndOwnTheirSessions) {
   ServerOptions options = TestOptions();
   options.auth_tokens = {"alpha-token", "beta-token"};
