@@ -788,6 +788,7 @@ grpc::ServerUnaryReactor* RegistrationService::GetServerInfo(grpc::CallbackServe
     limits->set_max_queue_size(static_cast<uint32_t>(o.batching.max_queue));
     limits->set_workers(static_cast<uint32_t>(o.batching.workers));
     limits->set_recommended_chunk_points(shared->RecommendedChunkPoints());
+    limits->set_max_open_streams(o.max_open_streams);
     return absl::OkStatus();
   });
 }

@@ -127,6 +127,7 @@ TEST_F(ServerTest, ServerInfoReportsTheModelAndLimits) {
   EXPECT_EQ(info.limits().max_batch(), 8u);
   EXPECT_GT(info.limits().recommended_chunk_points(), 1000u);
   EXPECT_LT(info.limits().recommended_chunk_points() * kBytesPerPoint, 1u << 20);
+  EXPECT_EQ(info.limits().max_open_streams(), 256u);
   EXPECT_FALSE(info.auth_required());
 }
 
