@@ -199,9 +199,15 @@ int RunCalibrateCommand(const std::vector<std::string>& /*args*/) {
     const std::filesystem::path parent = std::filesystem::path(output).parent_path();
     std::error_code ec;
     if (!parent.empty()) std::filesystem::create_directories(parent, ec);
-    std::ofstream(output + ".csv")
-        << "# " << set_description << "\n# " << (*registrar)->model_description() << "\n"
-        << csv;
+    const std::string command = absl::StrFormat(
+        "rpsr calibrate --evaluate --output %s --object_pairs %d --lidar_pairs %d --pair_seed "
+        "%d%s%s",
+        output, options.object_pairs_per_setting, options.lidar_pairs_per_offset, options.seed,
+        absl::GetFlag(FLAGS_model).empty() ? "" : " --model " + absl::GetFlag(FLAGS_model),
+        config.confidence_path.empty() ? "" : " --confidence " + config.confidence_path);
+    std::ofstream(output + ".csv") << "# " << command << "\n# " << set_description << "\n# "
+                                   << (*registrar)->model_description() << "\n"
+                                   << csv;
     std::ofstream(output + ".bins.csv") << bins;
     std::fprintf(stderr, "rpsr calibrate: wrote %s.csv and %s.bins.csv\n", output.c_str(),
                  output.c_str());

@@ -289,6 +289,16 @@ absl::StatusOr<ConfidenceModel> FitConfidenceModel(const std::vector<Calibration
       model.isotonic_x.push_back(b.x_sum / b.count);
       model.isotonic_y.push_back(b.y_sum / b.count);
     }
+    // The top block is often pure (all successes): a probability of exactly 1 claims more than a
+    // finite sample shows, so it takes the Jeffreys estimate (k + 1/2) / (n + 1) instead, kept
+    // strictly above its neighbour (the map stays increasing, so the logistic output's ranking
+    // survives). The bottom block keeps its rate: a 0 there ties with the invalid results.
+    const size_t m = model.isotonic_y.size();
+    if (m >= 2) {
+      const Block& last = blocks.back();
+      std::vector<double>& y = model.isotonic_y;
+      y.back() = std::max((last.y_sum + 0.5) / (last.count + 1.0), 0.5 * (y.back() + y[m - 2]));
+    }
     if (model.isotonic_x.size() < 2) {
       model.isotonic_x.clear();
       model.isotonic_y.clear();

@@ -168,8 +168,16 @@ double ConfidenceModel::RawProbability(const std::vector<double>& x) const {
 double ConfidenceModel::Probability(const std::vector<double>& x) const {
   const double p = RawProbability(x);
   if (isotonic_x.empty()) return p;
-  if (p <= isotonic_x.front()) return isotonic_y.front();
-  if (p >= isotonic_x.back()) return isotonic_y.back();
+  // Beyond the end points, straight on to (0, 0) and (1, 1): no flat ends, so two results the
+  // logistic model ranks apart stay apart.
+  if (p <= isotonic_x.front()) {
+    return isotonic_x.front() > 0 ? isotonic_y.front() * p / isotonic_x.front() : 0.0;
+  }
+  if (p >= isotonic_x.back()) {
+    const double rest = 1.0 - isotonic_x.back();
+    return rest > 0 ? isotonic_y.back() + (1.0 - isotonic_y.back()) * (p - isotonic_x.back()) / rest
+                    : isotonic_y.back();
+  }
   const size_t hi = static_cast<size_t>(std::upper_bound(isotonic_x.begin(), isotonic_x.end(), p) -
                                         isotonic_x.begin());
   const size_t lo = hi - 1;

@@ -17,7 +17,9 @@
 //   rpsr_confidence 1
 //   bias <b>
 //   feature <name> <mean> <scale> <weight>      one line per feature used (any subset, any order)
-//   isotonic <x_1> <y_1> ... <x_n> <y_n>        optional, x ascending, y non-decreasing in [0, 1]
+//   isotonic <x_1> <y_1> ... <x_n> <y_n>        optional, x ascending, y non-decreasing in [0, 1];
+//                                               linear between the points and on to (0, 0) and
+//                                               (1, 1) beyond the ends
 //   degenerate_cap <c>                          optional (default 0.05)
 #ifndef RPSR_CORE_REGISTRAR_CONFIDENCE_MODEL_H_
 #define RPSR_CORE_REGISTRAR_CONFIDENCE_MODEL_H_

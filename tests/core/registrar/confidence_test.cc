@@ -78,16 +78,34 @@ TEST(ConfidenceModelTest, InvalidIsZeroAndDegenerateIsCapped) {
   EXPECT_LE(model.Confidence(x, true, 3), 0.05);
 }
 
-TEST(ConfidenceModelTest, IsotonicMapInterpolatesAndClamps) {
+TEST(ConfidenceModelTest, IsotonicMapInterpolatesAndRunsOnToTheCorners) {
   ConfidenceModel model;
   model.isotonic_x = {0.2, 0.8};
   model.isotonic_y = {0.1, 0.7};
-  model.bias = 0.0;  // raw probability 0.5
-  EXPECT_NEAR(model.Probability(Features(0, 0)), 0.4, 1e-12);
-  model.bias = -10.0;
-  EXPECT_NEAR(model.Probability(Features(0, 0)), 0.1, 1e-12);
-  model.bias = 10.0;
-  EXPECT_NEAR(model.Probability(Features(0, 0)), 0.7, 1e-12);
+  auto at = [&](double raw) {
+    model.bias = std::log(raw / (1.0 - raw));  // the logistic output is `raw`
+    return model.Probability(Features(0, 0));
+  };
+  EXPECT_NEAR(at(0.5), 0.4, 1e-12);
+  EXPECT_NEAR(at(0.1), 0.05, 1e-12);  // on the line from (0, 0) to (0.2, 0.1)
+  EXPECT_NEAR(at(0.9), 0.85, 1e-12);  // on the line from (0.8, 0.7) to (1, 1)
+  EXPECT_LT(at(0.95), at(0.99));      // no flat ends
+  EXPECT_GT(at(0.01), at(0.001));
+}
+
+TEST(ConfidenceFitTest, ThePureTopBlockIsNeverCertain) {
+  std::vector<CalibrationSample> samples;
+  for (int i = 0; i < 200; ++i) {
+    const double fitness = i / 200.0;
+    samples.push_back(Sample(Features(fitness, 0), fitness > 0.5));
+  }
+  auto model = FitConfidenceModel(samples);
+  ASSERT_TRUE(model.ok()) << model.status();
+  ASSERT_GE(model->isotonic_y.size(), 2u);
+  EXPECT_LT(model->isotonic_y.back(), 1.0);
+  for (size_t i = 1; i < model->isotonic_y.size(); ++i) {
+    EXPECT_GT(model->isotonic_y[i], model->isotonic_y[i - 1]);
+  }
 }
 
 TEST(ReliabilityTest, PerfectAndKnownCases) {
