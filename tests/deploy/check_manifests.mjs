@@ -188,7 +188,8 @@ if (!rpsrd || !hpa || !flagsMap || !find("PodDisruptionBudget", "rpsrd")) {
                              .matchAll(/ABSL_FLAG\(\s*[\w:<>]+\s*,\s*(\w+)/g)].map((m) => m[1]));
   check(defined.size > 10, `found only ${defined.size} flags in server/rpsrd_main.cc`);
   const flags = new Map();
-  for (const line of flagsMap.data["rpsrd.flags"].split("\n").map((l) => l.trim()).filter(Boolean)) {
+  // Abseil's flag files: one --flag=value a line; lines starting with '#' are comments.
+  for (const line of flagsMap.data["rpsrd.flags"].split("\n").map((l) => l.trim()).filter((l) => l && !l.startsWith("#"))) {
     const m = line.match(/^--(\w+)=(.*)$/);
     if (!m) { fail(`rpsrd.flags: '${line}' is not --flag=value`); continue; }
     check(defined.has(m[1]), `rpsrd.flags: --${m[1]} is not a flag of rpsrd (server/rpsrd_main.cc)`);
@@ -200,7 +201,12 @@ if (!rpsrd || !hpa || !flagsMap || !find("PodDisruptionBudget", "rpsrd")) {
   const bytes = (q) => { const m = String(q).match(/^(\d+)(Ki|Mi|Gi)?$/); return m ? Number(m[1]) * { Ki: 1024, Mi: 1024 ** 2, Gi: 1024 ** 3 }[m[2] ?? ""] || Number(m[1]) : NaN; };
   const budget = Number(flags.get("cache_memory_bytes"));
   check(budget > 0, "rpsrd.flags sets no --cache_memory_bytes");
-  check(budget + 2 ** 30 <= bytes(c.resources.limits.memory), `the memory limit ${c.resources.limits.memory} leaves under 1 GiB beside the cache budget ${budget}`);
+  // Worst case: a full cache, every open upload at its largest (12 bytes a point until the tree is
+  // built), and ~0.5 GiB of LibTorch, the model and buffers.
+  const inFlight = Number(flags.get("max_open_streams")) * Number(flags.get("max_points_per_cloud")) * 12;
+  check(inFlight > 0, "rpsrd.flags must set --max_open_streams and --max_points_per_cloud (uploads in flight hold their points)");
+  check(budget + inFlight + 2 ** 29 <= bytes(c.resources.limits.memory),
+        `the memory limit ${c.resources.limits.memory} is below the cache budget (${budget}) + uploads in flight (${inFlight}) + 0.5 GiB`);
   check(budget <= bytes(c.resources.requests.memory), `the memory request ${c.resources.requests.memory} is below the cache budget ${budget}`);
   const alerts = YAML.parse(fs.readFileSync(path.join(root, "deploy/prometheus/alerts.yml"), "utf8"));
   const cacheAlert = alerts.groups.flatMap((g) => g.rules).find((r) => r.alert === "RpsrCacheMemoryHigh");
