@@ -685,7 +685,7 @@ TEST(ServerLimitsTest, ExpiredAndCancelledRequestsLeaveTheQueueUnrun) {
     v1::RegisterResponse response;
     a = client.Register(slow, &response);
   });
-  std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));  // A reaches the worker first
   std::thread second([&] {
     v1::RegisterResponse response;
     b = client.Register(brief, &response);
@@ -728,13 +728,15 @@ TEST(ServerLimitsTest, OpenStreamsAreBoundedAndTheirSlotsComeBack) {
     v1::TrackRequest start;
     start.mutable_start()->set_session_id(session);
     ASSERT_TRUE(track->Write(start));
-    // The Track stream holds the only slot (its start was read, so the server has opened it).
-    grpc::Status refused;
-    for (int i = 0; i < 100; ++i) {
-      refused = client.Upload(session, SmallCloud(), &response);
-      if (!refused.ok()) break;
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
+    // Frame 0 answered: the server has opened the Track stream, which holds the only slot.
+    const std::vector<Eigen::Vector3f> frame = SmallCloud();
+    v1::TrackRequest chunk;
+    chunk.mutable_chunk()->set_point_count(frame.size());
+    chunk.mutable_chunk()->set_xyz(EncodeXyz(frame));
+    ASSERT_TRUE(track->Write(chunk));
+    v1::TrackResponse answer;
+    ASSERT_TRUE(track->Read(&answer));
+    const grpc::Status refused = client.Upload(session, SmallCloud(), &response);
     EXPECT_CODE(refused, RESOURCE_EXHAUSTED, "upload and track streams open");
     track->WritesDone();
     EXPECT_TRUE(track->Finish().ok());
