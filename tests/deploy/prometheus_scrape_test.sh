@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # A real Prometheus (Debian's, deploy/prometheus/prometheus.yml with its alert rules) on
-# 127.0.0.1 scraping a real rpsrd; its HTTP API must show the target up, rpsr metrics with the
+# 127.0.0.1 scraping a real rpsrd started with deploy/k8s/configmap.yaml's flags; its HTTP API must show the target up, rpsr metrics with the
 # model loaded, the request counters of a few real calls by method and code, and the alert rules
 # loaded and healthy. Free ports, a temporary folder, both
 # processes ended at exit.
@@ -43,7 +43,12 @@ grpc_port=$(free_port)
 metrics_port=$(free_port)
 prom_port=$(free_port)
 
-OMP_WAIT_POLICY=PASSIVE "$rpsrd" --address="127.0.0.1:$grpc_port" \
+# rpsrd runs with the Kubernetes ConfigMap's flag file (every flag and value must parse), its
+# addresses moved to free loopback ports (later flags win).
+awk '/rpsrd.flags: \|/ {f = 1; next} f && /^    / {sub(/^    /, ""); print; next} f {exit}' \
+  "$root/deploy/k8s/configmap.yaml" >"$work/rpsrd.flags"
+[ "$(grep -c '^--' "$work/rpsrd.flags")" -ge 10 ] || fail "could not read the flags of deploy/k8s/configmap.yaml"
+OMP_WAIT_POLICY=PASSIVE "$rpsrd" --flagfile="$work/rpsrd.flags" --address="127.0.0.1:$grpc_port" \
   --metrics_address="127.0.0.1:$metrics_port" --log_requests=false >"$work/rpsrd.log" 2>&1 &
 pids+=($!)
 
