@@ -33,6 +33,13 @@ case "${1:-}" in
     port=$(docker-compose -f deploy/compose.yaml config | sed -n 's/.*--metrics_address=0.0.0.0:\([0-9]*\).*/\1/p')
     grep -q "targets: \[\"rpsrd:$port\"\]" deploy/prometheus/prometheus.yml ||
       fail "prometheus.yml does not scrape rpsrd:$port"
+    # rpsrd's command line: every flag is one rpsrd defines.
+    defined=$(grep -oE 'ABSL_FLAG\([^,]+, *[a-z_0-9]+' server/rpsrd_main.cc | sed -E 's/.*, *//' | sort -u)
+    flags=$(awk '/^  [a-z]+:$/ {s = ($1 == "rpsrd:")} s' deploy/compose.yaml | grep -oE -- '- --[a-z_0-9]+' | sed 's/- --//' | sort -u)
+    [ "$(wc -w <<<"$flags")" -ge 3 ] || fail "found no flags in compose's rpsrd command"
+    for flag in $flags; do
+      grep -qx "$flag" <<<"$defined" || fail "compose passes rpsrd --$flag, which rpsrd does not define"
+    done
     # Envoy (profile affinity) resolves the replicas by the name the rpsrd service is aliased to.
     envoy_host=$(sed -n 's/.*socket_address: {address: \([a-z-]*\), port_value: 50051}.*/\1/p' deploy/envoy/envoy.yaml)
     docker-compose -f deploy/compose.yaml config | grep -A3 'aliases:' | grep -q -- "- $envoy_host\$" ||
