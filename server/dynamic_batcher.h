@@ -64,7 +64,7 @@ struct DynamicBatcherOptions {
   // whatever is queued as soon as a worker is free (Triton's default); batches still form under
   // load, from the requests that gather while every worker is busy. A lone request pays the
   // whole delay (tests/bench/service_load_bench: ~2.2 ms added at 2 ms, ~0.1-0.2 ms at 0).
-  absl::Duration max_queue_delay = absl::Milliseconds(2);
+  absl::Duration max_queue_delay = absl::ZeroDuration();
   // Most requests waiting (not counting running batches), >= 1; one more is RESOURCE_EXHAUSTED.
   int max_queue = 1024;
   // Worker threads, each running one batch at a time, >= 1.

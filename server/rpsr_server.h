@@ -33,7 +33,10 @@ struct CacheOptions {
 // Registration batching across clients (Triton semantics; see dynamic_batcher.h).
 struct BatchingOptions {
   int max_batch = 16;
-  absl::Duration max_queue_delay = absl::Milliseconds(2);
+  // Zero: on a CPU a batch costs about what its pairs cost one by one (tests/bench/
+  // service_load_bench), so waiting for companions only adds latency; batches still form from the
+  // requests that gather while the workers are busy. Raise it where batching pays (a GPU).
+  absl::Duration max_queue_delay = absl::ZeroDuration();
   int max_queue = 1024;
   // Concurrent batches, and LibTorch intra-op threads each (DEPS.md: one per worker is best).
   int workers = 1;

@@ -99,7 +99,7 @@ absl::StatusOr<int> Get(std::future<absl::StatusOr<int>>& future) {
 TEST(DynamicBatcherTest, DefaultsAreTheDocumentedOnes) {
   DynamicBatcherOptions options;
   EXPECT_EQ(options.max_batch, 16);
-  EXPECT_EQ(options.max_queue_delay, absl::Milliseconds(2));
+  EXPECT_EQ(options.max_queue_delay, absl::ZeroDuration());
   EXPECT_EQ(options.max_queue, 1024);
   EXPECT_EQ(options.workers, 1);
   EXPECT_TRUE(options.drain_on_stop);
