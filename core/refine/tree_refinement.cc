@@ -422,8 +422,7 @@ std::pair<int, int> StageDepths(const Octree& source, const Octree& target,
                                 const TreeRefinementOptions& options) {
   const int deepest = std::min(source.max_depth(), target.max_depth());
   const int finest = options.finest_depth < 0 ? deepest : options.finest_depth;
-  const int coarsest = options.coarsest_depth < 0 ? std::min(finest, std::max(3, finest - 4))
-                                                  : options.coarsest_depth;
+  const int coarsest = options.coarsest_depth < 0 ? std::min(finest, 3) : options.coarsest_depth;
   return {coarsest, finest};
 }
 

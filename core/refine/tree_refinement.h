@@ -57,9 +57,12 @@ enum class WeightScheme {
 
 struct TreeRefinementOptions {
   // Depths visited, coarse to fine. finest_depth < 0: the deepest depth both trees hold.
-  // coarsest_depth < 0: max(3, finest - 4), i.e. five stages whose cells shrink 16 times, enough
-  // to pull in an initial error of about a coarse cell (7.5 m on a 240 m LiDAR cube, 0.125 on an
-  // object in [-1, 1]) while the depth-3 floor keeps at least a few dozen nodes per stage.
+  // coarsest_depth < 0: depth 3 (or the finest, if shallower), whose cells pull in an initial
+  // error of about a cell (30 m on a 240 m LiDAR cube, 0.25 on an object in [-1, 1]) while still
+  // holding a few dozen nodes. (It was max(3, finest - 4), five stages: on trees to depth 9 that
+  // starts at 7.5 m cells, and simulated LiDAR pairs 5 and 10 frames apart refined from the
+  // identity reached (1 deg, 1%) in 80 of 128 cases against 104 from depth 3; objects, whose trees
+  // stop at depth 6, are unchanged.) Coarse stages hold few nodes and cost little.
   int coarsest_depth = -1;
   int finest_depth = -1;
   // Gauss-Newton iterations per depth at most (each re-finds the correspondences).
