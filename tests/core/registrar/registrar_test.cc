@@ -171,9 +171,12 @@ TEST_F(RegistrarModesTest, TheNetworkStartsFromTheInitialGuess) {
   options.initial_T_target_source = pair_.T_target_source;
   auto from_truth = SharedRegistrar().Register(source_, target_, options);
   ASSERT_TRUE(from_identity.ok() && from_truth.ok());
-  // Started at the truth, the passes estimate a small remaining motion.
+  // Started at the truth, the passes estimate a small remaining motion: the result stays nearer
+  // the truth than the identity is (the network alone is ~11 deg RMSE on held-out objects, so a
+  // fixed bound would test the model's accuracy, not that the guess is used).
   const PairError e = ErrorOf(from_truth->T_target_source, pair_.T_target_source);
-  EXPECT_LT(e.rotation_deg, 10.0);
+  const PairError identity = ErrorOf(Eigen::Isometry3d::Identity(), pair_.T_target_source);
+  EXPECT_LT(e.rotation_deg, 0.75 * identity.rotation_deg);
   EXPECT_FALSE(from_truth->T_target_source.isApprox(from_identity->T_target_source, 1e-6));
 }
 
