@@ -107,6 +107,18 @@ struct RegistrationService::Shared {
   }
   void ReleaseStream() { open_streams.fetch_sub(1); }
 
+  // What every UploadCloud and Track stream checks first, in this order: admission, the caller's
+  // token, a stream slot. On success the caller holds a slot (ReleaseStream in OnDone) and gets
+  // its identity.
+  absl::StatusOr<std::string> OpenStream(const grpc::CallbackServerContext* context,
+                                         bool needs_model) {
+    if (absl::Status admitted = Admit(needs_model); !admitted.ok()) return admitted;
+    absl::StatusOr<std::string> caller = Authenticate(context);
+    if (!caller.ok()) return caller.status();
+    if (absl::Status slot = AcquireStream(); !slot.ok()) return slot;
+    return caller;
+  }
+
   // Refuses calls while draining, and calls that need the model before it is loaded.
   absl::Status Admit(bool needs_model) const {
     if (draining.load()) {
@@ -378,19 +390,9 @@ class UploadReactor final : public grpc::ServerReadReactor<v1::UploadCloudReques
         context_(context),
         response_(response),
         assembler_("upload", shared->options.max_points_per_cloud) {
-    absl::Status admitted = shared_->Admit(/*needs_model=*/false);
-    if (!admitted.ok()) {
-      FinishOnce(admitted);
-      return;
-    }
-    absl::StatusOr<std::string> caller = shared_->Authenticate(context);
+    absl::StatusOr<std::string> caller = shared_->OpenStream(context, /*needs_model=*/false);
     if (!caller.ok()) {
       FinishOnce(caller.status());
-      return;
-    }
-    absl::Status slot = shared_->AcquireStream();
-    if (!slot.ok()) {
-      FinishOnce(slot);
       return;
     }
     holds_stream_ = true;
@@ -499,19 +501,9 @@ class TrackReactor final : public grpc::ServerBidiReactor<v1::TrackRequest, v1::
  public:
   TrackReactor(Shared* shared, grpc::CallbackServerContext* context)
       : shared_(shared), record_(shared, "Track", context), context_(context) {
-    absl::Status admitted = shared_->Admit(/*needs_model=*/true);
-    if (!admitted.ok()) {
-      FinishOnce(admitted);
-      return;
-    }
-    absl::StatusOr<std::string> caller = shared_->Authenticate(context);
+    absl::StatusOr<std::string> caller = shared_->OpenStream(context, /*needs_model=*/true);
     if (!caller.ok()) {
       FinishOnce(caller.status());
-      return;
-    }
-    absl::Status slot = shared_->AcquireStream();
-    if (!slot.ok()) {
-      FinishOnce(slot);
       return;
     }
     holds_stream_ = true;
