@@ -165,6 +165,19 @@ class ClientChannel {
     }
   }
 
+  // Session affinity (deploy/envoy/envoy.yaml): every call of one session carries the same
+  // random key, so a consistent-hash proxy sends them all to the replica that caches the
+  // session's trees; without it the proxy hashes the client's address, which puts every session
+  // of a host (or of a NAT) on one replica. Drawn before the session exists (CreateSession must
+  // land where the later calls will) and kept when the session is re-created.
+  std::string NewAffinityKey() {
+    absl::MutexLock lock(&random_mutex_);
+    return absl::StrCat(absl::Hex(random_(), absl::kZeroPad16));
+  }
+  static void AddAffinity(grpc::ClientContext& context, const std::string& affinity_key) {
+    if (!affinity_key.empty()) context.AddMetadata("x-rpsr-affinity", affinity_key);
+  }
+
   // Runs `attempt` (which returns an absl::Status) until it answers anything but UNAVAILABLE or
   // the attempts run out.
   template <typename Attempt>
@@ -186,10 +199,12 @@ class ClientChannel {
   }
 
   // One whole upload (no retries): the first message carries the session and the count.
-  absl::StatusOr<rpsr::v1::UploadCloudResponse> UploadOnce(
-      const std::string& session_id, absl::Span<const Eigen::Vector3f> points) {
+  absl::StatusOr<rpsr::v1::UploadCloudResponse> UploadOnce(const std::string& session_id,
+                                                           absl::Span<const Eigen::Vector3f> points,
+                                                           const std::string& affinity_key) {
     grpc::ClientContext context;
     Prepare(context);
+    AddAffinity(context, affinity_key);
     rpsr::v1::UploadCloudResponse response;
     std::unique_ptr<grpc::ClientWriter<rpsr::v1::UploadCloudRequest>> writer =
         stub_->UploadCloud(&context, &response);
@@ -229,9 +244,10 @@ class ClientChannel {
 class TrackerStream {
  public:
   TrackerStream(std::shared_ptr<ClientChannel> channel, const std::string& session_id,
-                const TrackerOptions& options)
+                const std::string& affinity_key, const TrackerOptions& options)
       : channel_(std::move(channel)) {
     channel_->Prepare(context_, absl::ZeroDuration(), /*with_deadline=*/false);
+    ClientChannel::AddAffinity(context_, affinity_key);
     stream_ = channel_->stub().Track(&context_);
     rpsr::v1::TrackRequest request;
     rpsr::v1::TrackStart* start = request.mutable_start();
@@ -320,7 +336,9 @@ absl::Status Tracker::Finish() { return stream_->Finish(); }
 class SessionState {
  public:
   SessionState(std::shared_ptr<ClientChannel> channel, SessionOptions requested)
-      : channel_(std::move(channel)), requested_(std::move(requested)) {}
+      : channel_(std::move(channel)),
+        requested_(std::move(requested)),
+        affinity_key_(channel_->NewAffinityKey()) {}
 
   ~SessionState() { (void)Close(); }
 
@@ -336,6 +354,7 @@ class SessionState {
   const SessionOptions& options() const { return effective_; }
   ClientChannel& channel() { return *channel_; }
   std::shared_ptr<ClientChannel> shared_channel() { return channel_; }
+  const std::string& affinity_key() const { return affinity_key_; }
 
   absl::StatusOr<UploadedCloud> Upload(absl::Span<const Eigen::Vector3f> points) {
     const auto start = std::chrono::steady_clock::now();
@@ -395,6 +414,7 @@ class SessionState {
     absl::Status status = channel_->WithRetries([&] {
       grpc::ClientContext context;
       channel_->Prepare(context);
+      ClientChannel::AddAffinity(context, affinity_key_);
       rpsr::v1::ReleaseCloudRequest request;
       request.set_session_id(session_id);
       request.set_cloud_id(server_id);
@@ -418,6 +438,7 @@ class SessionState {
     absl::Status status = channel_->WithRetries([&] {
       grpc::ClientContext context;
       channel_->Prepare(context, absl::Seconds(5));
+      ClientChannel::AddAffinity(context, affinity_key_);
       rpsr::v1::CloseSessionRequest request;
       request.set_session_id(session_id);
       rpsr::v1::CloseSessionResponse response;
@@ -439,6 +460,7 @@ class SessionState {
     absl::Status status = channel_->WithRetries([&] {
       grpc::ClientContext context;
       channel_->Prepare(context);
+      ClientChannel::AddAffinity(context, affinity_key_);
       rpsr::v1::CreateSessionRequest request;
       request.mutable_options()->set_tree_max_depth(requested_.tree_max_depth);
       request.mutable_options()->set_model(requested_.model);
@@ -469,7 +491,7 @@ class SessionState {
       if (closed()) return absl::FailedPreconditionError("the session was closed");
       absl::StatusOr<rpsr::v1::UploadCloudResponse> response;
       absl::Status status = channel_->WithRetries([&] {
-        response = channel_->UploadOnce(session_id, points);
+        response = channel_->UploadOnce(session_id, points, affinity_key_);
         return response.status();
       });
       // NOT_FOUND on upload: the session expired; open a new one once.
@@ -535,6 +557,7 @@ class SessionState {
     absl::Status status = channel_->WithRetries([&] {
       grpc::ClientContext context;
       channel_->Prepare(context, options.timeout);
+      ClientChannel::AddAffinity(context, affinity_key_);
       return ToAbslStatus(channel_->stub().Register(&context, request, &response));
     });
     if (!status.ok()) return status;
@@ -543,6 +566,7 @@ class SessionState {
 
   std::shared_ptr<ClientChannel> channel_;
   const SessionOptions requested_;
+  const std::string affinity_key_;  // see ClientChannel::NewAffinityKey
   SessionOptions effective_;
   mutable absl::Mutex mutex_;
   std::string session_id_ ABSL_GUARDED_BY(mutex_);
@@ -604,8 +628,8 @@ absl::Status Session::Release(uint64_t cloud_id) { return state_->Release(cloud_
 absl::Status Session::Close() { return state_->Close(); }
 
 absl::StatusOr<std::unique_ptr<Tracker>> Session::StartTracker(const TrackerOptions& options) {
-  return std::unique_ptr<Tracker>(
-      new Tracker(std::make_unique<TrackerStream>(state_->shared_channel(), id(), options)));
+  return std::unique_ptr<Tracker>(new Tracker(std::make_unique<TrackerStream>(
+      state_->shared_channel(), id(), state_->affinity_key(), options)));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -722,7 +746,7 @@ std::future<absl::StatusOr<RegistrationResult>> Client::RegisterInlineAsync(
 
 absl::StatusOr<std::unique_ptr<Tracker>> Client::StartTracker(const TrackerOptions& options) {
   return std::unique_ptr<Tracker>(
-      new Tracker(std::make_unique<TrackerStream>(channel_, "", options)));
+      new Tracker(std::make_unique<TrackerStream>(channel_, "", "", options)));
 }
 
 }  // namespace rpsr::client
