@@ -99,16 +99,7 @@ int RunDemoCommand(const std::vector<std::string>& args) {
         (*session)->Register(source->points, target->points, register_options);
     if (!result.ok()) return Fail(1, absl::StrCat(sample.name, ": ", result.status().ToString()));
 
-    PairReport report;
-    report.T_target_source = result->T_target_source;
-    report.valid = result->valid;
-    report.failure_reason = result->failure_reason;
-    report.confidence = result->confidence;
-    report.fitness = result->fitness;
-    report.inlier_rmse = result->inlier_rmse;
-    report.iterations = result->iterations;
-    report.mode = result->mode;
-    report.seconds = result->round_trip_seconds;
+    PairReport report = ReportOf(*result);
     report.truth = pair->T_target_source;
     const std::string picture = (fs::path(output) / sample.picture).string();
     if (absl::Status status = WritePairPicture(picture, *source, *target, result->T_target_source);

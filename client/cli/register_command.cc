@@ -79,17 +79,7 @@ absl::StatusOr<PairReport> RegisterOnServer(const core::PointCloud& source,
   absl::StatusOr<RegistrationResult> result =
       (*session)->Register(source.points, target.points, register_options);
   if (!result.ok()) return result.status();
-  PairReport report;
-  report.T_target_source = result->T_target_source;
-  report.valid = result->valid;
-  report.failure_reason = result->failure_reason;
-  report.confidence = result->confidence;
-  report.fitness = result->fitness;
-  report.inlier_rmse = result->inlier_rmse;
-  report.iterations = result->iterations;
-  report.mode = result->mode;
-  report.seconds = result->round_trip_seconds;
-  return report;
+  return ReportOf(*result);
 }
 #endif
 

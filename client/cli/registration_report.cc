@@ -41,6 +41,22 @@ PairReport ReportOf(const core::RegistrationResult& result, double seconds) {
   return report;
 }
 
+#if RPSR_CLI_HAS_SERVICE
+PairReport ReportOf(const RegistrationResult& result) {
+  PairReport report;
+  report.T_target_source = result.T_target_source;
+  report.valid = result.valid;
+  report.failure_reason = result.failure_reason;
+  report.confidence = result.confidence;
+  report.fitness = result.fitness;
+  report.inlier_rmse = result.inlier_rmse;
+  report.iterations = result.iterations;
+  report.mode = result.mode;
+  report.seconds = result.round_trip_seconds;
+  return report;
+}
+#endif
+
 bool IsSceneScale(const core::PointCloud& cloud) { return Diagonal(cloud) > kSceneDiagonal; }
 
 int ChooseTreeDepth(const core::PointCloud& source, const core::PointCloud& target, int requested) {

@@ -11,6 +11,9 @@
 #include "absl/status/statusor.h"
 #include "core/cloud/point_cloud.h"
 #include "core/registrar/registrar.h"
+#if RPSR_CLI_HAS_SERVICE
+#include "client/rpsr_client.h"
+#endif
 
 namespace rpsr::client {
 
@@ -30,6 +33,10 @@ struct PairReport {
 };
 
 PairReport ReportOf(const core::RegistrationResult& result, double seconds);
+#if RPSR_CLI_HAS_SERVICE
+// A result the service returned; `seconds` is its round trip.
+PairReport ReportOf(const RegistrationResult& result);
+#endif
 
 // Clouds whose bounding box diagonal exceeds this are LiDAR-like scenes (metres), smaller ones
 // objects (normalised into [-1, 1]^3 by the data generators).

@@ -23,10 +23,11 @@ namespace {
 // The refinement's default start (depth 3: 30 m cells on a 240 m LiDAR cube) pulls in large
 // motions but on deep trees it can also lock onto a wrong coarse match that a start four depths
 // above the finest (7.5 m cells) avoids: simulated LiDAR pairs fail either way on different sets
-// (80 vs 104 of 128 calibration pairs for depth 3; 40 vs 48 of 48 pairs 3 m apart for the finer
-// start). So on deep trees the finer start goes first and the depth-3 start runs only when it
-// ends invalid; the valid result with the higher fitness (then the lower inlier RMSE) wins.
-// Shallow trees (objects, depth 6) have one start: depth 3. A caller's coarsest_depth is kept.
+// (calibration pairs 5 and 10 frames apart: 80 of 128 from the finer start, 104 from depth 3;
+// pairs 3 m apart: 46 of 48 from the finer start, 40 from depth 3; this fallback: 47 and 48 of 48).
+// So on deep trees the finer start goes first and the depth-3 start runs only when it ends invalid;
+// the valid result with the higher fitness (then the lower inlier RMSE) wins. Shallow trees
+// (objects, depth 6) have one start: depth 3. A caller's coarsest_depth is kept.
 bool Better(const TreeRefinementResult& a, const TreeRefinementResult& b) {
   if (a.valid != b.valid) return a.valid;
   if (a.fitness != b.fitness) return a.fitness > b.fitness;

@@ -15,11 +15,16 @@
 #include "core/synth/shape_families.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "tests/core/refine/refinement_test_geometry.h"
 
 namespace rpsr::core {
 namespace {
 
 using ::testing::HasSubstr;
+using testing_util::Corridor;
+using testing_util::Perturbed;
+using testing_util::Plane;
+using testing_util::Sphere;
 
 constexpr double kDeg = M_PI / 180.0;
 
@@ -30,16 +35,6 @@ Octree TreeOf(const PointCloud& cloud, int max_depth) {
   auto tree = BuildOctree(cloud, options);
   EXPECT_TRUE(tree.ok()) << tree.status();
   return *std::move(tree);
-}
-
-// Truth composed with a rotation of `angle_rad` about a random axis and a translation of length
-// `shift` in a random direction (applied in the target frame).
-Eigen::Isometry3d Perturbed(const Eigen::Isometry3d& truth, double angle_rad, double shift,
-                            std::mt19937_64& rng) {
-  std::normal_distribution<double> normal;
-  const Eigen::Vector3d axis = Eigen::Vector3d(normal(rng), normal(rng), normal(rng)).normalized();
-  const Eigen::Vector3d dir = Eigen::Vector3d(normal(rng), normal(rng), normal(rng)).normalized();
-  return MakeTransform(Eigen::AngleAxisd(angle_rad, axis).toRotationMatrix(), shift * dir) * truth;
 }
 
 TEST(TreeRefinementTest, ObjectsConvergeFromNetworkSizedErrors) {
@@ -99,48 +94,6 @@ TEST(TreeRefinementTest, SimulatedLidarPairFiveFramesApartFromIdentity) {
 }
 
 // Points on z = 0 (a square), on two walls and a floor of a corridor along x, on a sphere.
-PointCloud Plane(int n, uint64_t seed) {
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
-  PointCloud cloud;
-  for (int i = 0; i < n; ++i) cloud.points.emplace_back(u(rng), u(rng), 0.0f);
-  return cloud;
-}
-
-PointCloud Corridor(int n, uint64_t seed) {
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<float> along(-10.0f, 10.0f);
-  std::uniform_real_distribution<float> u(0.0f, 1.0f);
-  PointCloud cloud;
-  for (int i = 0; i < n; ++i) {
-    const float x = along(rng);
-    switch (i % 3) {
-      case 0:
-        cloud.points.emplace_back(x, -1.5f + 3.0f * u(rng), 0.0f);
-        break;
-      case 1:
-        cloud.points.emplace_back(x, -1.5f, 2.5f * u(rng));
-        break;
-      default:
-        cloud.points.emplace_back(x, 1.5f, 2.5f * u(rng));
-        break;
-    }
-  }
-  return cloud;
-}
-
-PointCloud Sphere(int n, uint64_t seed) {
-  std::mt19937_64 rng(seed);
-  std::normal_distribution<float> normal;
-  PointCloud cloud;
-  const Eigen::Vector3f center(0.3f, -0.2f, 0.1f);
-  for (int i = 0; i < n; ++i) {
-    cloud.points.push_back(center +
-                           Eigen::Vector3f(normal(rng), normal(rng), normal(rng)).normalized());
-  }
-  return cloud;
-}
-
 struct DegenerateCase {
   std::string name;
   PointCloud (*make)(int, uint64_t);
