@@ -15,6 +15,7 @@
 #include "core/data/training_pairs.h"
 #include "core/net/rpsr_net.h"
 #include "core/net/trainer.h"
+#include "core/registrar/embedded_models.h"
 
 // --protocol, --output, --seed and --num_points are shared with other subcommands
 // (shared_flags.cc).
@@ -31,6 +32,10 @@ ABSL_FLAG(bool, resume, true, "continue from the state in --output when present"
 ABSL_FLAG(int, embedding_width, 128, "token width E after Tree-to-Voxel");
 ABSL_FLAG(int, feedforward_width, 256, "Transformer feed-forward width");
 ABSL_FLAG(std::string, conv_widths, "32,64,128", "tree convolution widths at depths 5,4,3");
+ABSL_FLAG(std::string, init, "",
+          "start from these weights instead of fresh ones (fine-tuning): a .rpsrw file or the "
+          "name of an embedded model (objects); the architecture is the file's, so the width "
+          "flags are ignored; a run resumed from --output keeps its own weights");
 ABSL_FLAG(double, disturbed_fraction, 0.3,
           "objects: fraction of training pairs with noise, outliers, a crop or jitter");
 
@@ -47,6 +52,19 @@ absl::StatusOr<std::array<int, 3>> ParseWidths(const std::string& text) {
     }
   }
   return widths;
+}
+
+// The network training starts from: fresh weights, or --init's (a file or an embedded model).
+absl::StatusOr<std::unique_ptr<core::RpsrNet>> InitialNetwork(const core::RpsrNetConfig& config,
+                                                              uint64_t seed) {
+  const std::string init = absl::GetFlag(FLAGS_init);
+  if (init.empty()) return core::RpsrNet::Create(config, seed);
+  if (init.find('/') == std::string::npos && init.find('.') == std::string::npos) {
+    absl::StatusOr<core::EmbeddedModel> embedded = core::FindEmbeddedModel(init);
+    if (!embedded.ok()) return embedded.status();
+    return core::RpsrNet::LoadFromBytes(embedded->weights, "embedded model " + init);
+  }
+  return core::RpsrNet::Load(init);
 }
 
 }  // namespace
@@ -116,7 +134,7 @@ int RunTrainCommand(const std::vector<std::string>& /*args*/) {
   config.embedding_width = absl::GetFlag(FLAGS_embedding_width);
   config.feedforward_width = absl::GetFlag(FLAGS_feedforward_width);
   config.passes = options.passes;
-  absl::StatusOr<std::unique_ptr<core::RpsrNet>> net = core::RpsrNet::Create(config, seed);
+  absl::StatusOr<std::unique_ptr<core::RpsrNet>> net = InitialNetwork(config, seed);
   if (!net.ok()) {
     std::fprintf(stderr, "rpsr train: %s\n", std::string(net.status().message()).c_str());
     return 1;

@@ -2,6 +2,8 @@
 
 #include <cmath>
 
+#include "core/net/inference_kernels.h"
+
 namespace rpsr::core::net {
 namespace {
 
@@ -103,13 +105,15 @@ TreeConvImpl::TreeConvImpl(int64_t in_channels, int64_t out_channels) : in_chann
 
 torch::Tensor TreeConvImpl::forward(const torch::Tensor& features, const torch::Tensor& neighbors) {
   const int64_t rows = neighbors.size(0);
-  torch::Tensor gathered = WithZeroRow(features)
-                               .index_select(0, neighbors.reshape({-1}))
-                               .reshape({rows, 27 * in_channels_});
+  torch::Tensor gathered = UseInferenceKernels(features)
+                               ? GatherRowsOrZero(features, neighbors)
+                               : WithZeroRow(features).index_select(0, neighbors.reshape({-1}));
+  gathered = gathered.reshape({rows, 27 * in_channels_});
   return torch::relu(norm_->forward(linear_->forward(gathered)));
 }
 
 torch::Tensor PoolToParents(const torch::Tensor& child_features, const torch::Tensor& child_slots) {
+  if (UseInferenceKernels(child_features)) return MaxOverSlots(child_features, child_slots);
   const int64_t parents = child_slots.size(0);
   const int64_t channels = child_features.size(1);
   // Children come out of a ReLU (>= 0), so the zero row of an empty slot never wins the max
@@ -151,8 +155,9 @@ HierarchicalEncoderImpl::HierarchicalEncoderImpl(const RpsrNetConfig& config) {
 torch::Tensor HierarchicalEncoderImpl::forward(const PackedClouds& clouds) {
   torch::Tensor fused =
       position_branch_->forward(clouds, true) * density_branch_->forward(clouds, false);
-  torch::Tensor tokens = WithZeroRow(fused)
-                             .index_select(0, clouds.token_node.reshape({-1}))
+  torch::Tensor tokens = (UseInferenceKernels(fused)
+                              ? GatherRowsOrZero(fused, clouds.token_node)
+                              : WithZeroRow(fused).index_select(0, clouds.token_node.reshape({-1})))
                              .reshape({clouds.batch, kNetTokens, fused.size(1)});
   torch::Tensor embedded = to_embedding_->forward(tokens);
   // Empty tokens stay exactly zero (the bias would otherwise make them look alike and real).
@@ -216,14 +221,20 @@ std::pair<torch::Tensor, torch::Tensor> WeightedProcrustes(const torch::Tensor& 
   // for nearly symmetric correspondences and produced NaN steps in training.
   const auto dtype = src.scalar_type();
   torch::Tensor H = torch::matmul((w3 * src_c).transpose(1, 2), tgt_c).to(torch::kFloat64);
-  auto [U, S, Vh] = torch::linalg_svd(H, /*full_matrices=*/false, c10::nullopt);
-  torch::Tensor V = Vh.transpose(1, 2);
-  torch::Tensor Ut = U.transpose(1, 2);
-  // Reflection fix: flip the last column of V where det(V U^T) < 0.
-  torch::Tensor det = torch::linalg_det(torch::matmul(V, Ut));
-  torch::Tensor ones = torch::ones_like(det);
-  torch::Tensor diag = torch::stack({ones, ones, torch::sign(det) + (det == 0).to(det.dtype())}, 1);
-  torch::Tensor R = torch::matmul(V * diag.unsqueeze(1), Ut).to(dtype);
+  torch::Tensor R;
+  if (UseInferenceKernels(src) && !(torch::GradMode::is_enabled() && H.requires_grad())) {
+    R = KabschRotation(H).to(dtype);
+  } else {
+    auto [U, S, Vh] = torch::linalg_svd(H, /*full_matrices=*/false, c10::nullopt);
+    torch::Tensor V = Vh.transpose(1, 2);
+    torch::Tensor Ut = U.transpose(1, 2);
+    // Reflection fix: flip the last column of V where det(V U^T) < 0.
+    torch::Tensor det = torch::linalg_det(torch::matmul(V, Ut));
+    torch::Tensor ones = torch::ones_like(det);
+    torch::Tensor diag =
+        torch::stack({ones, ones, torch::sign(det) + (det == 0).to(det.dtype())}, 1);
+    R = torch::matmul(V * diag.unsqueeze(1), Ut).to(dtype);
+  }
   torch::Tensor t = tgt_mean.squeeze(1) - torch::matmul(R, src_mean.transpose(1, 2)).squeeze(-1);
   return {R, t};
 }

@@ -1,0 +1,36 @@
+// CPU inference versions of the network's gather, pooling and SVD steps (private to core/net).
+//
+// Why: at inference on CPU the tree convolutions' GEMMs are about a third of a pass; the rest
+// was LibTorch's generic operators on small rows (index_select copies 1-64 floats per index
+// through its iterator; max over the 8 child slots reduces along a strided dimension;
+// linalg_svd and linalg_det loop over 3x3 matrices with per-matrix tensor views). These plain
+// loops compute the same values (the gather and the max are exact copies and comparisons; the
+// 3x3 SVD runs in double with Eigen instead of LAPACK) and are used only where no gradient is
+// wanted and the tensors are on the CPU; training and CUDA keep the differentiable operators.
+#ifndef RPSR_CORE_NET_INFERENCE_KERNELS_H_
+#define RPSR_CORE_NET_INFERENCE_KERNELS_H_
+
+#include <torch/torch.h>
+
+#include <utility>
+
+namespace rpsr::core::net {
+
+// True when `t` can take the kernels below: CPU float32, and no autograd graph is being built.
+bool UseInferenceKernels(const torch::Tensor& t);
+
+// rows[i] = features[indices[i]], or zeros where indices[i] == features.size(0).
+// features [N, C] float, indices int64 of any shape with R elements; returns [R, C].
+torch::Tensor GatherRowsOrZero(const torch::Tensor& features, const torch::Tensor& indices);
+
+// out[p] = max over the 8 slots of features[slots[p, k]], a slot equal to features.size(0)
+// counting as a zero row. features [N, C] float, slots [P, 8] int64; returns [P, C].
+torch::Tensor MaxOverSlots(const torch::Tensor& features, const torch::Tensor& slots);
+
+// Rotation with the reflection fix from H = sum_i w_i src_i tgt_i^T (the Kabsch cross-covariance):
+// R = V diag(1, 1, sign det(V U^T)) U^T. H [B, 3, 3] (any float type); returns R [B, 3, 3] double.
+torch::Tensor KabschRotation(const torch::Tensor& H);
+
+}  // namespace rpsr::core::net
+
+#endif  // RPSR_CORE_NET_INFERENCE_KERNELS_H_

@@ -1,0 +1,109 @@
+// The CPU inference kernels give what the differentiable operators they replace give: the
+// gather and the pooling exactly, the SVD head within double rounding; and they are chosen only
+// where no gradient is wanted.
+#include "core/net/inference_kernels.h"
+
+#include <torch/torch.h>
+
+#include "core/net/rpsr_modules.h"
+#include "gtest/gtest.h"
+
+namespace rpsr::core::net {
+namespace {
+
+// Index tensor into `rows` rows with about a third "empty" (== rows).
+torch::Tensor IndicesWithEmpty(int64_t count, int64_t rows, int64_t width, uint64_t seed) {
+  torch::manual_seed(seed);
+  torch::Tensor idx = torch::randint(rows, {count, width}, torch::kInt64);
+  torch::Tensor empty = torch::rand({count, width}) < 0.33;
+  return torch::where(empty, torch::full_like(idx, rows), idx);
+}
+
+torch::Tensor WithZeroRow(const torch::Tensor& f) {
+  return torch::cat({f, torch::zeros({1, f.size(1)}, f.options())}, 0);
+}
+
+TEST(InferenceKernelsTest, GatherEqualsIndexSelectWithAZeroRow) {
+  for (int64_t channels : {1, 6, 32, 128}) {
+    torch::Tensor features = torch::randn({300, channels});
+    torch::Tensor idx = IndicesWithEmpty(200, 300, 27, 7 + channels);
+    torch::Tensor expected = WithZeroRow(features).index_select(0, idx.reshape({-1}));
+    torch::Tensor got = GatherRowsOrZero(features, idx);
+    ASSERT_EQ(got.sizes(), expected.sizes());
+    EXPECT_TRUE(torch::equal(got, expected)) << "channels " << channels;
+  }
+}
+
+TEST(InferenceKernelsTest, GatherRejectsIndicesOutsideTheRows) {
+  torch::Tensor features = torch::randn({10, 4});
+  EXPECT_THROW(GatherRowsOrZero(features, torch::tensor({0, 11}, torch::kInt64)), c10::Error);
+  EXPECT_THROW(GatherRowsOrZero(features, torch::tensor({-1}, torch::kInt64)), c10::Error);
+}
+
+TEST(InferenceKernelsTest, MaxOverSlotsEqualsTheGenericPoolingOfReluOutputs) {
+  for (int64_t channels : {1, 32, 64}) {
+    torch::Tensor children = torch::relu(torch::randn({400, channels}));
+    torch::Tensor slots = IndicesWithEmpty(120, 400, 8, 11 + channels);
+    torch::Tensor gathered =
+        WithZeroRow(children).index_select(0, slots.reshape({-1})).reshape({120, 8, channels});
+    torch::Tensor expected = std::get<0>(gathered.max(1));
+    EXPECT_TRUE(torch::equal(MaxOverSlots(children, slots), expected)) << "channels " << channels;
+  }
+}
+
+TEST(InferenceKernelsTest, KabschRotationEqualsTheDifferentiableHead) {
+  torch::manual_seed(5);
+  torch::Tensor src = torch::randn({8, 64, 3});
+  torch::Tensor tgt = torch::randn({8, 64, 3});
+  // Make half of them mirror images so that the reflection fix is exercised.
+  tgt.index_put_({torch::indexing::Slice(0, 4)},
+                 src.index({torch::indexing::Slice(0, 4)}) * torch::tensor({1.0f, 1.0f, -1.0f}));
+  torch::Tensor weights = torch::rand({8, 64}) + 0.05;
+  torch::Tensor R_fast, t_fast;
+  {
+    torch::NoGradGuard no_grad;
+    std::tie(R_fast, t_fast) = WeightedProcrustes(src, tgt, weights);
+  }
+  // The differentiable path runs when the correspondences carry a gradient.
+  torch::Tensor tgt_grad = tgt.clone().requires_grad_(true);
+  auto [R_slow, t_slow] = WeightedProcrustes(src, tgt_grad, weights);
+  EXPECT_LT((R_fast - R_slow.detach()).abs().max().item<float>(), 1e-5);
+  EXPECT_LT((t_fast - t_slow.detach()).abs().max().item<float>(), 1e-5);
+  torch::Tensor det = torch::linalg_det(R_fast.to(torch::kFloat64));
+  EXPECT_LT((det - 1.0).abs().max().item<double>(), 1e-5);
+}
+
+TEST(InferenceKernelsTest, ChosenOnlyWithoutGradientOnCpuFloat) {
+  torch::Tensor leaf = torch::randn({4, 4}).requires_grad_(true);
+  EXPECT_FALSE(UseInferenceKernels(leaf));
+  EXPECT_FALSE(UseInferenceKernels(torch::randn({4, 4}, torch::kFloat64)));
+  EXPECT_TRUE(UseInferenceKernels(torch::randn({4, 4})));
+  {
+    torch::NoGradGuard no_grad;
+    EXPECT_TRUE(UseInferenceKernels(leaf));
+  }
+  {
+    torch::InferenceMode inference;
+    EXPECT_TRUE(UseInferenceKernels(torch::randn({4, 4})));
+  }
+}
+
+// The whole encoder: the inference path gives the training path's depth-2 features.
+TEST(InferenceKernelsTest, TreeConvolutionAndPoolingMatchTheTrainingPath) {
+  torch::manual_seed(9);
+  TreeConv conv(6, 32);
+  conv->eval();
+  torch::Tensor features = torch::randn({500, 6});
+  torch::Tensor neighbors = IndicesWithEmpty(500, 500, 27, 13);
+  torch::Tensor slots = IndicesWithEmpty(90, 500, 8, 17);
+  torch::Tensor slow = PoolToParents(conv->forward(features, neighbors), slots);
+  torch::Tensor fast;
+  {
+    torch::InferenceMode inference;
+    fast = PoolToParents(conv->forward(features, neighbors), slots);
+  }
+  EXPECT_TRUE(torch::allclose(fast, slow.detach(), 1e-6, 1e-6));
+}
+
+}  // namespace
+}  // namespace rpsr::core::net
