@@ -51,6 +51,27 @@ absl::StatusOr<TreeRefinementResult> RefineWithFallback(const Octree& source, co
   return Better(*second, *first) ? second : first;
 }
 
+// The initial guess's result replaces the network's only when it is clearly better: valid where
+// the other is not, or one more percent of the source overlapping. On objects with a
+// translational or rotational symmetry both starts reach equally good fits in different poses,
+// and the network's start, which saw the shapes, is the better prior there.
+bool ClearlyBetter(const TreeRefinementResult& a, const TreeRefinementResult& b) {
+  if (a.valid != b.valid) return a.valid;
+  return a.valid && a.fitness > b.fitness + 0.01;
+}
+
+// A first answer at least this confident (a calibrated probability of being within 1 degree and
+// 1% of the extent) is kept without trying the initial guess as a second start.
+constexpr double kConfidentEnough = 0.9;
+
+// Two starts closer than this converge to the same result: 0.25 degrees and 0.25% of the
+// target cube's half-length.
+bool NearlyEqual(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b, const Octree& target) {
+  const Eigen::Isometry3d d = a.inverse() * b;
+  const double angle = Eigen::AngleAxisd(d.linear()).angle();
+  return angle < 0.25 * M_PI / 180.0 && d.translation().norm() < 0.0025 * target.half_length();
+}
+
 using Clock = std::chrono::steady_clock;
 
 double SecondsSince(Clock::time_point start) {
@@ -248,37 +269,53 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   if (options.mode == RegistrationMode::kNet) refinement.evaluate_only = true;
   absl::StatusOr<TreeRefinementResult> refined =
       RefineWithFallback(source, target, from, refinement);
-  result.timings.refine_seconds = SecondsSince(refine_start);
+  double confidence_seconds = 0.0;
+  // Fills `out` from a refinement that started at `start_pose`, confidence included.
+  auto settle = [&](const TreeRefinementResult& r, const Eigen::Isometry3d& start_pose,
+                    RegistrationResult& out) {
+    out.T_target_source = r.T_target_source;
+    out.valid = r.valid;
+    out.failure_reason = r.failure_reason;
+    out.fitness = r.fitness;
+    out.inlier_rmse = r.inlier_rmse;
+    out.iterations = r.iterations;
+    out.converged = r.converged;
+    out.information = r.information;
+    out.degenerate_axes = r.degenerate_axes;
+    out.num_degenerate = r.num_degenerate;
+    const auto confidence_start = Clock::now();
+    ConfidenceInputs inputs;
+    inputs.result = &out;
+    inputs.refinement = &r;
+    inputs.source = &source;
+    inputs.target = &target;
+    if (net_output != nullptr) inputs.net_per_pass = net_output->estimate.per_pass;
+    inputs.refine_start = start_pose;
+    out.confidence_features = ConfidenceFeatureVector(inputs);
+    out.confidence = confidence.Confidence(out.confidence_features, out.valid, out.num_degenerate);
+    confidence_seconds += SecondsSince(confidence_start);
+  };
   if (!refined.ok()) {
     // Inputs were validated: only an unexpected failure lands here.
+    result.timings.refine_seconds = SecondsSince(refine_start);
     result.T_target_source = from;
     result.failure_reason = absl::StrCat("refinement failed: ", refined.status().message());
     result.timings.total_seconds = SecondsSince(start) + result.timings.net_seconds;
     return result;
   }
-  result.T_target_source = refined->T_target_source;
-  result.valid = refined->valid;
-  result.failure_reason = refined->failure_reason;
-  result.fitness = refined->fitness;
-  result.inlier_rmse = refined->inlier_rmse;
-  result.iterations = refined->iterations;
-  result.converged = refined->converged;
-  result.information = refined->information;
-  result.degenerate_axes = refined->degenerate_axes;
-  result.num_degenerate = refined->num_degenerate;
-
-  const auto confidence_start = Clock::now();
-  ConfidenceInputs inputs;
-  inputs.result = &result;
-  inputs.refinement = &*refined;
-  inputs.source = &source;
-  inputs.target = &target;
-  if (net_output != nullptr) inputs.net_per_pass = net_output->estimate.per_pass;
-  inputs.refine_start = from;
-  result.confidence_features = ConfidenceFeatureVector(inputs);
-  result.confidence =
-      confidence.Confidence(result.confidence_features, result.valid, result.num_degenerate);
-  result.timings.confidence_seconds = SecondsSince(confidence_start);
+  settle(*refined, from, result);
+  // The second start (RegistrationOptions::also_refine_from_initial) runs only when the first
+  // answer is not already confident.
+  if (options.mode == RegistrationMode::kNetRefine && options.also_refine_from_initial &&
+      result.confidence < kConfidentEnough && !NearlyEqual(from, initial, target)) {
+    absl::StatusOr<TreeRefinementResult> from_initial =
+        RefineWithFallback(source, target, initial, refinement);
+    if (from_initial.ok() && ClearlyBetter(*from_initial, *refined)) {
+      settle(*from_initial, initial, result);
+    }
+  }
+  result.timings.refine_seconds = SecondsSince(refine_start) - confidence_seconds;
+  result.timings.confidence_seconds = confidence_seconds;
   result.timings.total_seconds = SecondsSince(start) + result.timings.net_seconds;
   return result;
 }

@@ -46,6 +46,11 @@ struct RegistrationOptions {
   // A starting guess of T_target_source. The network starts from it (its passes estimate the
   // remaining motion); `refine` starts from it (identity when absent).
   std::optional<Eigen::Isometry3d> initial_T_target_source;
+  // net+refine: also refine from the initial guess (identity when absent) and keep the better
+  // result (valid first, then fitness, then inlier RMSE), so that a network estimate worse than
+  // the caller's guess (a scan pair with little motion, a model off its training distribution)
+  // cannot make the answer worse than `refine`. Skipped when the two starts nearly coincide.
+  bool also_refine_from_initial = true;
   TreeRefinementOptions refinement;
 };
 
