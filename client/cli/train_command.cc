@@ -1,5 +1,6 @@
 // rpsr train: trains RPSRNet from scratch (or resumes) on a seeded pair protocol and writes the
 // weights, the optimizer state and a CSV log to --output.
+#include <cmath>
 #include <cstdio>
 #include <string>
 #include <thread>
@@ -32,6 +33,10 @@ ABSL_FLAG(bool, resume, true, "continue from the state in --output when present"
 ABSL_FLAG(int, embedding_width, 128, "token width E after Tree-to-Voxel");
 ABSL_FLAG(int, feedforward_width, 256, "Transformer feed-forward width");
 ABSL_FLAG(std::string, conv_widths, "32,64,128", "tree convolution widths at depths 5,4,3");
+ABSL_FLAG(double, net_cube_half_length, 0.0,
+          "0: the network bins each pair in its target's own cube; > 0: in a cube of this "
+          "half-length around the target's centre of mass, points outside dropped (for LiDAR "
+          "scenes, e.g. 40 metres; stored in the weights)");
 ABSL_FLAG(std::string, init, "",
           "start from these weights instead of fresh ones (fine-tuning): a .rpsrw file or the "
           "name of an embedded model (objects); the architecture is the file's, so the width "
@@ -134,6 +139,11 @@ int RunTrainCommand(const std::vector<std::string>& /*args*/) {
   config.embedding_width = absl::GetFlag(FLAGS_embedding_width);
   config.feedforward_width = absl::GetFlag(FLAGS_feedforward_width);
   config.passes = options.passes;
+  config.cube_half_length = absl::GetFlag(FLAGS_net_cube_half_length);
+  if (!(config.cube_half_length >= 0) || !std::isfinite(config.cube_half_length)) {
+    std::fprintf(stderr, "rpsr train: --net_cube_half_length must be >= 0\n");
+    return 2;
+  }
   absl::StatusOr<std::unique_ptr<core::RpsrNet>> net = InitialNetwork(config, seed);
   if (!net.ok()) {
     std::fprintf(stderr, "rpsr train: %s\n", std::string(net.status().message()).c_str());

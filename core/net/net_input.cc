@@ -78,21 +78,61 @@ absl::StatusOr<NetCloudInput> MakeNetInput(const Octree& tree) {
   return input;
 }
 
-absl::StatusOr<NetCloudInput> MakeMovedNetInput(const Octree& source, const Eigen::Isometry3d& T,
-                                                const Octree& cube_of) {
-  const Octree::Level& level = source.level(std::min(source.max_depth(), kMovedSourceDepth));
-  std::vector<Eigen::Vector3f> moved(level.size());
+namespace {
+
+// The nodes of `cloud` at depth min(max_depth, 7), moved by T and (when `crop`) kept only inside
+// the cube, re-binned into the cube as weighted points.
+absl::StatusOr<NetCloudInput> Rebinned(const Octree& cloud, const Eigen::Isometry3d& T,
+                                       const Eigen::Vector3d& center, double half_length,
+                                       bool crop) {
+  const Octree::Level& level = cloud.level(std::min(cloud.max_depth(), kMovedSourceDepth));
+  std::vector<Eigen::Vector3f> moved;
+  std::vector<uint32_t> counts;
+  moved.reserve(level.size());
+  counts.reserve(level.size());
   const Eigen::Isometry3f Tf = T.cast<float>();
-  for (size_t i = 0; i < level.size(); ++i) moved[i] = Tf * level.center_of_mass[i];
+  const Eigen::Vector3f c = center.cast<float>();
+  // Strictly inside, so that no kept point is clamped into a border cell.
+  const float limit = static_cast<float>(half_length * (1.0 - 1e-6));
+  for (size_t i = 0; i < level.size(); ++i) {
+    const Eigen::Vector3f p = Tf * level.center_of_mass[i];
+    if (crop && (p - c).cwiseAbs().maxCoeff() >= limit) continue;
+    moved.push_back(p);
+    counts.push_back(level.count[i]);
+  }
+  if (moved.empty()) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("no point of the cloud lies within the network's cube (half-length ",
+                     half_length, " around the target's centre of mass)"));
+  }
   BarnesHutTreeOptions options;
   options.max_depth = kNetLeafDepth;
   options.neighbor_max_depth = kNetLeafDepth;
-  options.cube_center = {cube_of.center().x(), cube_of.center().y(), cube_of.center().z()};
-  options.cube_half_length = cube_of.half_length();
+  options.cube_center = {center.x(), center.y(), center.z()};
+  options.cube_half_length = half_length;
   absl::StatusOr<Octree> rebinned =
-      BuildWeightedBarnesHutTree<3>(absl::MakeConstSpan(moved), level.count, options);
+      BuildWeightedBarnesHutTree<3>(absl::MakeConstSpan(moved), counts, options);
   if (!rebinned.ok()) return rebinned.status();
   return MakeNetInput(*rebinned);
+}
+
+}  // namespace
+
+absl::StatusOr<NetCloudInput> MakeMovedNetInput(const Octree& source, const Eigen::Isometry3d& T,
+                                                const Octree& cube_of) {
+  return Rebinned(source, T, cube_of.center(), cube_of.half_length(), /*crop=*/false);
+}
+
+NetCube CroppedNetCube(const Octree& target, double half_length) {
+  NetCube cube;
+  cube.center = target.level(0).center_of_mass[0].cast<double>();
+  cube.half_length = half_length;
+  return cube;
+}
+
+absl::StatusOr<NetCloudInput> MakeCroppedNetInput(const Octree& cloud, const Eigen::Isometry3d& T,
+                                                  const NetCube& cube) {
+  return Rebinned(cloud, T, cube.center, cube.half_length, /*crop=*/true);
 }
 
 }  // namespace rpsr::core

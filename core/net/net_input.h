@@ -63,6 +63,23 @@ absl::StatusOr<NetCloudInput> MakeNetInput(const Octree& tree);
 absl::StatusOr<NetCloudInput> MakeMovedNetInput(const Octree& source, const Eigen::Isometry3d& T,
                                                 const Octree& cube_of);
 
+// A cropped cube for both clouds of a pair (RpsrNetConfig::cube_half_length > 0): centred on the
+// target's centre of mass, which on a LiDAR scan lies near the sensor because the points are
+// densest there, with a fixed half-length in the clouds' units. Why: a scan's own cube is ~240 m
+// wide, its 64 depth-2 tokens are 60 m cells and a street fills one or two layers of them, too
+// coarse for motions of a few metres; a 40 m half-length gives 20 m tokens and 2.5 m cells at
+// depth 5, and drops the sparse far points.
+struct NetCube {
+  Eigen::Vector3d center = Eigen::Vector3d::Zero();
+  double half_length = 1.0;
+};
+NetCube CroppedNetCube(const Octree& target, double half_length);
+
+// `cloud` moved by T, from its nodes at depth min(max_depth, 7) weighted by their counts, keeping
+// only those inside `cube`, re-binned into it. FailedPrecondition when none is inside.
+absl::StatusOr<NetCloudInput> MakeCroppedNetInput(const Octree& cloud, const Eigen::Isometry3d& T,
+                                                  const NetCube& cube);
+
 }  // namespace rpsr::core
 
 #endif  // RPSR_CORE_NET_NET_INPUT_H_

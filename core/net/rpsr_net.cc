@@ -3,6 +3,7 @@
 #include <malloc.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <mutex>
 
@@ -17,10 +18,11 @@ namespace rpsr::core {
 namespace net {
 
 std::string ConfigToText(const RpsrNetConfig& c) {
-  return absl::StrCat("conv_widths=", c.conv_widths[0], ",", c.conv_widths[1], ",",
-                      c.conv_widths[2], "\nembedding_width=", c.embedding_width,
-                      "\nattention_heads=", c.attention_heads,
-                      "\nfeedforward_width=", c.feedforward_width, "\npasses=", c.passes, "\n");
+  return absl::StrCat(
+      "conv_widths=", c.conv_widths[0], ",", c.conv_widths[1], ",", c.conv_widths[2],
+      "\nembedding_width=", c.embedding_width, "\nattention_heads=", c.attention_heads,
+      "\nfeedforward_width=", c.feedforward_width, "\npasses=", c.passes,
+      c.cube_half_length > 0 ? absl::StrCat("\ncube_half_length=", c.cube_half_length) : "", "\n");
 }
 
 absl::StatusOr<RpsrNetConfig> ConfigFromText(absl::string_view text) {
@@ -50,6 +52,11 @@ absl::StatusOr<RpsrNetConfig> ConfigFromText(absl::string_view text) {
       s = parse(c.feedforward_width);
     } else if (kv.first == "passes") {
       s = parse(c.passes);
+    } else if (kv.first == "cube_half_length") {
+      if (!absl::SimpleAtod(kv.second, &c.cube_half_length) || !(c.cube_half_length > 0) ||
+          !std::isfinite(c.cube_half_length)) {
+        return absl::InvalidArgumentError(absl::StrCat("bad network config line '", line, "'"));
+      }
     }  // Unknown keys are ignored: newer files may carry more.
     if (!s.ok()) return s;
   }
@@ -61,14 +68,18 @@ absl::StatusOr<RpsrNetConfig> ConfigFromText(absl::string_view text) {
   return c;
 }
 
-absl::StatusOr<PackedClouds> PackTargets(absl::Span<const NetPair> pairs) {
+absl::StatusOr<PackedClouds> PackTargets(absl::Span<const NetPair> pairs, double cube_half_length) {
   std::vector<NetCloudInput> inputs;
   inputs.reserve(pairs.size());
   for (size_t b = 0; b < pairs.size(); ++b) {
     if (pairs[b].source == nullptr || pairs[b].target == nullptr) {
       return absl::InvalidArgumentError(absl::StrCat("pair ", b, " lacks a source or target tree"));
     }
-    absl::StatusOr<NetCloudInput> input = MakeNetInput(*pairs[b].target);
+    absl::StatusOr<NetCloudInput> input =
+        cube_half_length > 0
+            ? MakeCroppedNetInput(*pairs[b].target, Eigen::Isometry3d::Identity(),
+                                  CroppedNetCube(*pairs[b].target, cube_half_length))
+            : MakeNetInput(*pairs[b].target);
     if (!input.ok()) return input.status();
     inputs.push_back(*std::move(input));
   }
@@ -78,12 +89,16 @@ absl::StatusOr<PackedClouds> PackTargets(absl::Span<const NetPair> pairs) {
 }
 
 absl::StatusOr<PackedClouds> PackMovedSources(absl::Span<const NetPair> pairs,
-                                              const std::vector<Eigen::Isometry3d>& estimates) {
+                                              const std::vector<Eigen::Isometry3d>& estimates,
+                                              double cube_half_length) {
   std::vector<NetCloudInput> inputs;
   inputs.reserve(pairs.size());
   for (size_t b = 0; b < pairs.size(); ++b) {
     absl::StatusOr<NetCloudInput> input =
-        MakeMovedNetInput(*pairs[b].source, estimates[b], *pairs[b].target);
+        cube_half_length > 0
+            ? MakeCroppedNetInput(*pairs[b].source, estimates[b],
+                                  CroppedNetCube(*pairs[b].target, cube_half_length))
+            : MakeMovedNetInput(*pairs[b].source, estimates[b], *pairs[b].target);
     if (!input.ok()) return input.status();
     inputs.push_back(*std::move(input));
   }
@@ -195,7 +210,8 @@ absl::StatusOr<std::vector<NetEstimate>> RpsrNet::Estimate(absl::Span<const NetP
   try {
     torch::InferenceMode inference;
     net::RpsrNetwork& network = impl_->network;
-    absl::StatusOr<net::PackedClouds> targets = net::PackTargets(pairs);
+    absl::StatusOr<net::PackedClouds> targets =
+        net::PackTargets(pairs, impl_->config.cube_half_length);
     if (!targets.ok()) return targets.status();
     const net::PackedClouds target = targets->To(impl_->device);
     const torch::Tensor target_embedding = network->Encode(target);
@@ -206,7 +222,8 @@ absl::StatusOr<std::vector<NetEstimate>> RpsrNet::Estimate(absl::Span<const NetP
     torch::Tensor scores;
     torch::Tensor source_empty;
     for (int pass = 0; pass < passes; ++pass) {
-      absl::StatusOr<net::PackedClouds> sources = net::PackMovedSources(pairs, estimates);
+      absl::StatusOr<net::PackedClouds> sources =
+          net::PackMovedSources(pairs, estimates, impl_->config.cube_half_length);
       if (!sources.ok()) return sources.status();
       const net::PackedClouds source = sources->To(impl_->device);
       net::PassOutput out = network->Pass(source, target, target_embedding);

@@ -38,6 +38,10 @@ struct RpsrNetConfig {
   int attention_heads = 4;
   int feedforward_width = 256;
   int passes = 3;  // default number of passes at inference
+  // 0: each pair is binned in its target tree's own cube. > 0: in a cube of this half-length (the
+  // clouds' units) around the target's centre of mass, points outside dropped (net_input.h:
+  // CroppedNetCube; meant for scene-scale clouds).
+  double cube_half_length = 0.0;
 };
 
 // One pair to register. Trees must have depth >= 5 with neighbour tables to depth 5 (the

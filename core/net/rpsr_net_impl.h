@@ -25,10 +25,12 @@ std::string ConfigToText(const RpsrNetConfig& config);
 absl::StatusOr<RpsrNetConfig> ConfigFromText(absl::string_view text);
 
 // The network's inputs of a batch of pairs for one pass: the targets (fixed over passes) and
-// the sources moved by `estimates` and re-binned into their targets' cubes.
-absl::StatusOr<PackedClouds> PackTargets(absl::Span<const NetPair> pairs);
+// the sources moved by `estimates` and re-binned into their targets' cubes (cropped cubes when
+// cube_half_length > 0, RpsrNetConfig::cube_half_length).
+absl::StatusOr<PackedClouds> PackTargets(absl::Span<const NetPair> pairs, double cube_half_length);
 absl::StatusOr<PackedClouds> PackMovedSources(absl::Span<const NetPair> pairs,
-                                              const std::vector<Eigen::Isometry3d>& estimates);
+                                              const std::vector<Eigen::Isometry3d>& estimates,
+                                              double cube_half_length);
 
 // [B, 3, 3] and [B, 3] tensors -> isometries (double).
 std::vector<Eigen::Isometry3d> ToIsometries(const torch::Tensor& rotation,

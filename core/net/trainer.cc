@@ -282,7 +282,8 @@ absl::StatusOr<std::vector<EpochRecord>> TrainRpsrNet(
         torch::Tensor R_gt = ToTensor(truths, true).to(device);
         torch::Tensor t_gt = ToTensor(truths, false).to(device);
 
-        absl::StatusOr<net::PackedClouds> targets = net::PackTargets(batch);
+        absl::StatusOr<net::PackedClouds> targets =
+            net::PackTargets(batch, impl.config.cube_half_length);
         if (!targets.ok()) return targets.status();
         const net::PackedClouds target = targets->To(device);
         torch::Tensor target_embedding = impl.network->Encode(target);
@@ -290,7 +291,8 @@ absl::StatusOr<std::vector<EpochRecord>> TrainRpsrNet(
         torch::Tensor loss = torch::zeros({1}, torch::TensorOptions().device(device));
         torch::Tensor rotation_loss, translation_loss;
         for (int pass = 1; pass <= options.passes; ++pass) {
-          absl::StatusOr<net::PackedClouds> sources = net::PackMovedSources(batch, estimates);
+          absl::StatusOr<net::PackedClouds> sources =
+              net::PackMovedSources(batch, estimates, impl.config.cube_half_length);
           if (!sources.ok()) return sources.status();
           net::PassOutput out = impl.network->Pass(sources->To(device), target, target_embedding);
           // Compose with the (constant) estimate so far: T_k = step o T_{k-1}.

@@ -76,5 +76,48 @@ TEST(NetInputTest, ShallowTreeIsRejected) {
   EXPECT_EQ(MakeNetInput(*tree).status().code(), absl::StatusCode::kFailedPrecondition);
 }
 
+// A scene-like cloud: a dense patch near the origin and sparse far points.
+PointCloud SceneLike() {
+  PointCloud cloud = testing::AsymmetricObject(3000, 4);
+  for (Eigen::Vector3f& p : cloud.points) p *= 10.0f;  // +-10 m around the "sensor"
+  for (int i = 0; i < 50; ++i) {
+    cloud.points.push_back(Eigen::Vector3f(100.0f + i, -90.0f, 2.0f));  // a far wall
+  }
+  return cloud;
+}
+
+TEST(NetInputTest, CroppedCubeKeepsOnlyPointsInsideAroundTheTargetsCentreOfMass) {
+  BarnesHutTreeOptions options;
+  options.max_depth = 8;
+  auto tree = BuildOctree(SceneLike(), options);
+  ASSERT_TRUE(tree.ok());
+  const NetCube cube = CroppedNetCube(*tree, 40.0);
+  EXPECT_TRUE(cube.center.isApprox(tree->level(0).center_of_mass[0].cast<double>()));
+  EXPECT_EQ(cube.half_length, 40.0);
+  auto input = MakeCroppedNetInput(*tree, Eigen::Isometry3d::Identity(), cube);
+  ASSERT_TRUE(input.ok()) << input.status();
+  EXPECT_EQ(input->cube_half_length, 40.0);
+  EXPECT_TRUE(input->cube_center.isApprox(cube.center, 1e-9));
+  float weight = 0.0f;
+  for (int s = 0; s < kNetTokens; ++s) {
+    weight += input->token_weight[s];
+    if (input->token_node[s] < 0) continue;
+    // Every kept token's centre of mass lies inside the cube: the far wall was dropped, not
+    // clamped into border cells.
+    for (int a = 0; a < 3; ++a) {
+      EXPECT_LT(std::abs(input->token_com[s * 3 + a] - cube.center[a]), 40.0) << "token " << s;
+    }
+  }
+  EXPECT_NEAR(weight, 1.0f, 1e-5f);  // fractions of the kept points
+  for (float v : input->depths[0].position) EXPECT_LE(std::abs(v), 2.0f);
+
+  // Moved so that nothing stays inside: a clear error, not an empty input.
+  Eigen::Isometry3d far = Eigen::Isometry3d::Identity();
+  far.translation() = Eigen::Vector3d(1000, 0, 0);
+  auto outside = MakeCroppedNetInput(*tree, far, cube);
+  EXPECT_EQ(outside.status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(outside.status().message(), ::testing::HasSubstr("within the network's cube"));
+}
+
 }  // namespace
 }  // namespace rpsr::core

@@ -40,6 +40,40 @@ TEST(WeightsFileTest, SaveLoadRoundTripGivesIdenticalEstimates) {
   EXPECT_TRUE((*a)[0].T_target_source.isApprox((*b)[0].T_target_source, 1e-12));
 }
 
+TEST(WeightsFileTest, TheCroppedCubeTravelsWithTheWeights) {
+  RpsrNetConfig config;
+  config.embedding_width = 32;
+  config.feedforward_width = 64;
+  config.conv_widths = {8, 16, 32};
+  config.cube_half_length = 1.5;
+  auto net = RpsrNet::Create(config, 7);
+  ASSERT_TRUE(net.ok()) << net.status();
+  const std::string path = ::testing::TempDir() + "/cropped.rpsrw";
+  ASSERT_TRUE((*net)->Save(path).ok());
+  auto loaded = RpsrNet::Load(path);
+  ASSERT_TRUE(loaded.ok()) << loaded.status();
+  EXPECT_EQ((*loaded)->config().cube_half_length, 1.5);
+
+  // The cube changes what the network reads: with the same weights, a network binning in a 1.5
+  // cube around the target's centre of mass and one binning in the target's own cube give
+  // different estimates; the loaded one gives the saved one's.
+  config.cube_half_length = 0.0;
+  auto uncropped = RpsrNet::Create(config, 7);
+  ASSERT_TRUE(uncropped.ok());
+  auto source = BuildOctree(testing::AsymmetricObject(2048, 1));
+  auto target = BuildOctree(TransformedCloud(
+      testing::AsymmetricObject(2048, 2), testing::SmallMotion(0.2, {0.1, 0.0, 0}).cast<float>()));
+  ASSERT_TRUE(source.ok() && target.ok());
+  const NetPair pair{&*source, &*target};
+  auto a = (*loaded)->Estimate({&pair, 1});
+  auto b = (*uncropped)->Estimate({&pair, 1});
+  ASSERT_TRUE(a.ok() && b.ok()) << a.status() << b.status();
+  EXPECT_FALSE((*a)[0].T_target_source.isApprox((*b)[0].T_target_source, 1e-6));
+  auto c = (*net)->Estimate({&pair, 1});
+  ASSERT_TRUE(c.ok());
+  EXPECT_TRUE((*a)[0].T_target_source.isApprox((*c)[0].T_target_source, 1e-12));
+}
+
 TEST(WeightsFileTest, CorruptFilesGiveClearErrors) {
   RpsrNetConfig config;
   config.embedding_width = 16;
