@@ -13,11 +13,17 @@ namespace {
 
 using ::testing::HasSubstr;
 
-TEST(WeightsFileTest, SaveLoadRoundTripGivesIdenticalEstimates) {
+// A small network that saves and loads in milliseconds.
+RpsrNetConfig SmallConfig() {
   RpsrNetConfig config;
   config.embedding_width = 32;
   config.feedforward_width = 64;
   config.conv_widths = {8, 16, 32};
+  return config;
+}
+
+TEST(WeightsFileTest, SaveLoadRoundTripGivesIdenticalEstimates) {
+  RpsrNetConfig config = SmallConfig();
   config.passes = 2;
   auto net = RpsrNet::Create(config, 7);
   ASSERT_TRUE(net.ok()) << net.status();
@@ -41,10 +47,7 @@ TEST(WeightsFileTest, SaveLoadRoundTripGivesIdenticalEstimates) {
 }
 
 TEST(WeightsFileTest, TheCroppedCubeTravelsWithTheWeights) {
-  RpsrNetConfig config;
-  config.embedding_width = 32;
-  config.feedforward_width = 64;
-  config.conv_widths = {8, 16, 32};
+  RpsrNetConfig config = SmallConfig();
   config.cube_half_length = 1.5;
   auto net = RpsrNet::Create(config, 7);
   ASSERT_TRUE(net.ok()) << net.status();
