@@ -40,7 +40,8 @@ ABSL_FLAG(double, net_cube_half_length, 0.0,
 ABSL_FLAG(std::string, init, "",
           "start from these weights instead of fresh ones (fine-tuning): a .rpsrw file or the "
           "name of an embedded model (objects); the architecture is the file's, so the width "
-          "flags are ignored; a run resumed from --output keeps its own weights");
+          "flags are ignored and --net_cube_half_length is refused; a run resumed from --output "
+          "keeps its own weights");
 ABSL_FLAG(double, disturbed_fraction, 0.3,
           "objects: fraction of training pairs with noise, outliers, a crop or jitter");
 
@@ -140,6 +141,12 @@ int RunTrainCommand(const std::vector<std::string>& /*args*/) {
   config.feedforward_width = absl::GetFlag(FLAGS_feedforward_width);
   config.passes = options.passes;
   config.cube_half_length = absl::GetFlag(FLAGS_net_cube_half_length);
+  if (config.cube_half_length != 0.0 && !absl::GetFlag(FLAGS_init).empty()) {
+    std::fprintf(stderr,
+                 "rpsr train: --net_cube_half_length cannot change a model given by --init (the "
+                 "cube is part of its architecture); train from fresh weights instead\n");
+    return 2;
+  }
   if (!(config.cube_half_length >= 0) || !std::isfinite(config.cube_half_length)) {
     std::fprintf(stderr, "rpsr train: --net_cube_half_length must be >= 0\n");
     return 2;

@@ -3,7 +3,9 @@
 #include <ATen/Parallel.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
+#include <limits>
 
 #include "Eigen/Core"
 #include "Eigen/LU"
@@ -68,10 +70,15 @@ torch::Tensor MaxOverSlots(const torch::Tensor& features, const torch::Tensor& s
           continue;
         }
         if (k == rows) {
-          for (int64_t c = 0; c < channels; ++c) o[c] = std::max(o[c], 0.0f);
+          for (int64_t c = 0; c < channels; ++c) {
+            if (o[c] < 0.0f) o[c] = 0.0f;
+          }
         } else {
           const float* r = in + k * channels;
-          for (int64_t c = 0; c < channels; ++c) o[c] = std::max(o[c], r[c]);
+          // NaN wins, as in torch::max.
+          for (int64_t c = 0; c < channels; ++c) {
+            if (r[c] > o[c] || std::isnan(r[c])) o[c] = r[c];
+          }
         }
       }
     }
@@ -86,6 +93,11 @@ torch::Tensor KabschRotation(const torch::Tensor& H) {
   using RowMajor3d = Eigen::Matrix<double, 3, 3, Eigen::RowMajor>;
   for (int64_t b = 0; b < batch; ++b) {
     const Eigen::Map<const RowMajor3d> m(h.data_ptr<double>() + 9 * b);
+    Eigen::Map<RowMajor3d> R(out.data_ptr<double>() + 9 * b);
+    if (!m.allFinite()) {
+      R.setConstant(std::numeric_limits<double>::quiet_NaN());
+      continue;
+    }
     const Eigen::JacobiSVD<Eigen::Matrix3d> svd(Eigen::Matrix3d(m),
                                                 Eigen::ComputeFullU | Eigen::ComputeFullV);
     const Eigen::Matrix3d& U = svd.matrixU();
@@ -93,7 +105,7 @@ torch::Tensor KabschRotation(const torch::Tensor& H) {
     const double det = (V * U.transpose()).determinant();
     // Same rule as the differentiable path: flip the last column of V where det < 0.
     if (det < 0) V.col(2) = -V.col(2);
-    Eigen::Map<RowMajor3d>(out.data_ptr<double>() + 9 * b) = V * U.transpose();
+    R = V * U.transpose();
   }
   return out;
 }

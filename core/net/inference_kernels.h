@@ -1,12 +1,14 @@
 // CPU inference versions of the network's gather, pooling and SVD steps (private to core/net).
 //
-// Why: at inference on CPU the tree convolutions' GEMMs are about a third of a pass; the rest
-// was LibTorch's generic operators on small rows (index_select copies 1-64 floats per index
-// through its iterator; max over the 8 child slots reduces along a strided dimension;
-// linalg_svd and linalg_det loop over 3x3 matrices with per-matrix tensor views). These plain
-// loops compute the same values (the gather and the max are exact copies and comparisons; the
-// 3x3 SVD runs in double with Eigen instead of LAPACK) and are used only where no gradient is
-// wanted and the tensors are on the CPU; training and CUDA keep the differentiable operators.
+// Why: at inference on CPU the tree convolutions' GEMMs are about half of a pass (LibTorch's
+// profiler, one 2,048-point object pair); much of the rest was generic operators on small rows
+// (index_select copies 1-128 floats per index through its iterator; max over the 8 child slots
+// reduces along a strided dimension; linalg_svd and linalg_det loop over 3x3 matrices with
+// per-matrix tensor views). These plain loops compute the same values (the gather and the max
+// are exact copies and comparisons, NaN propagating like torch::max; the 3x3 SVD runs in double
+// with Eigen instead of LAPACK, the same rotation wherever it is unique, i.e. H of rank >= 2)
+// and are used only where no gradient is wanted and the tensors are on the CPU; training and
+// CUDA keep the differentiable operators.
 #ifndef RPSR_CORE_NET_INFERENCE_KERNELS_H_
 #define RPSR_CORE_NET_INFERENCE_KERNELS_H_
 
@@ -28,7 +30,8 @@ torch::Tensor GatherRowsOrZero(const torch::Tensor& features, const torch::Tenso
 torch::Tensor MaxOverSlots(const torch::Tensor& features, const torch::Tensor& slots);
 
 // Rotation with the reflection fix from H = sum_i w_i src_i tgt_i^T (the Kabsch cross-covariance):
-// R = V diag(1, 1, sign det(V U^T)) U^T. H [B, 3, 3] (any float type); returns R [B, 3, 3] double.
+// R = V diag(1, 1, sign det(V U^T)) U^T. H [B, 3, 3] (any float type); returns R [B, 3, 3] double,
+// all NaN for an H that is not finite (as the differentiable path's NaN would propagate).
 torch::Tensor KabschRotation(const torch::Tensor& H);
 
 }  // namespace rpsr::core::net

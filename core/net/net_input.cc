@@ -102,8 +102,9 @@ absl::StatusOr<NetCloudInput> Rebinned(const Octree& cloud, const Eigen::Isometr
   }
   if (moved.empty()) {
     return absl::FailedPreconditionError(
-        absl::StrCat("no point of the cloud lies within the network's cube (half-length ",
-                     half_length, " around the target's centre of mass)"));
+        crop ? absl::StrCat("no point of the cloud lies within the network's cube (half-length ",
+                            half_length, " around the target's centre of mass)")
+             : std::string("the cloud's tree holds no nodes"));
   }
   BarnesHutTreeOptions options;
   options.max_depth = kNetLeafDepth;

@@ -9,6 +9,7 @@
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
 #include "core/io/file_bytes.h"
 #include "core/net/rpsr_net_impl.h"
@@ -22,7 +23,9 @@ std::string ConfigToText(const RpsrNetConfig& c) {
       "conv_widths=", c.conv_widths[0], ",", c.conv_widths[1], ",", c.conv_widths[2],
       "\nembedding_width=", c.embedding_width, "\nattention_heads=", c.attention_heads,
       "\nfeedforward_width=", c.feedforward_width, "\npasses=", c.passes,
-      c.cube_half_length > 0 ? absl::StrCat("\ncube_half_length=", c.cube_half_length) : "", "\n");
+      // %.17g: the value survives the text round trip exactly (resuming compares it).
+      c.cube_half_length > 0 ? absl::StrFormat("\ncube_half_length=%.17g", c.cube_half_length) : "",
+      "\n");
 }
 
 absl::StatusOr<RpsrNetConfig> ConfigFromText(absl::string_view text) {
@@ -144,6 +147,11 @@ RpsrNet::~RpsrNet() = default;
 
 absl::StatusOr<std::unique_ptr<RpsrNet>> RpsrNet::Create(const RpsrNetConfig& config,
                                                          uint64_t seed) {
+  if (!(config.cube_half_length >= 0) || !std::isfinite(config.cube_half_length)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("cube_half_length must be finite and >= 0 (0: each target's own cube); got ",
+                     config.cube_half_length));
+  }
   absl::StatusOr<RpsrNetConfig> checked = net::ConfigFromText(net::ConfigToText(config));
   if (!checked.ok()) return checked.status();
   try {

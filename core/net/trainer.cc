@@ -196,6 +196,17 @@ absl::StatusOr<std::vector<EpochRecord>> TrainRpsrNet(
       if (!bytes.ok()) return bytes.status();
       absl::StatusOr<net::NamedTensors> weights = net::ParseWeights(*bytes, last_path);
       if (!weights.ok()) return weights.status();
+      // What the tensors' shapes cannot tell (the cube the inputs are binned in) is compared by
+      // the config text, so that a run resumed without the original flags fails clearly instead
+      // of training on differently prepared inputs.
+      absl::StatusOr<RpsrNetConfig> saved = net::ConfigFromText(weights->config_text);
+      if (!saved.ok()) return saved.status();
+      if (saved->cube_half_length != impl.config.cube_half_length) {
+        return absl::FailedPreconditionError(
+            absl::StrCat(last_path, ": saved with cube_half_length ", saved->cube_half_length,
+                         " but this run asks for ", impl.config.cube_half_length,
+                         "; resume with the flags of the original run or use a new --output"));
+      }
       if (absl::Status s = net::LoadTensorsInto(*weights, *impl.network); !s.ok()) {
         return absl::FailedPreconditionError(
             absl::StrCat(last_path, ": ", s.message(),

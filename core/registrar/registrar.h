@@ -46,10 +46,14 @@ struct RegistrationOptions {
   // A starting guess of T_target_source. The network starts from it (its passes estimate the
   // remaining motion); `refine` starts from it (identity when absent).
   std::optional<Eigen::Isometry3d> initial_T_target_source;
-  // net+refine: also refine from the initial guess (identity when absent) and keep the better
-  // result (valid first, then fitness, then inlier RMSE), so that a network estimate worse than
-  // the caller's guess (a scan pair with little motion, a model off its training distribution)
-  // cannot make the answer worse than `refine`. Skipped when the two starts nearly coincide.
+  // net+refine: when the answer refined from the network's estimate has a confidence below 0.9,
+  // also refine from the initial guess (identity when absent) and keep that answer if it is
+  // clearly better (valid where the first is not, or 1% more of the source overlapping), so that
+  // a network estimate worse than the caller's guess (a scan pair with little motion, a model off
+  // its training distribution) rarely makes the answer worse than `refine`; it can still be (a
+  // confident wrong first answer, or two fits of equal overlap). Skipped when the two starts
+  // nearly coincide. The confidence of either answer comes from the same model, calibrated on
+  // this pipeline (its features include the network's, whichever start won).
   bool also_refine_from_initial = true;
   TreeRefinementOptions refinement;
 };

@@ -4,6 +4,7 @@
 // Counters: ms per upload, the server's tree build (ms) and the chunks sent.
 //
 //   OMP_WAIT_POLICY=PASSIVE build/tests/bench/upload_bench --benchmark_counters_tabular=true
+#include <cstdio>
 #include <cstdlib>
 #include <memory>
 #include <string>
@@ -16,6 +17,11 @@
 
 namespace rpsr {
 namespace {
+
+[[noreturn]] void Die(const absl::Status& status) {
+  std::fprintf(stderr, "upload_bench: %s\n", status.ToString().c_str());
+  std::abort();
+}
 
 const std::vector<Eigen::Vector3f>& Scan() {
   static const auto* points = [] {
@@ -35,7 +41,7 @@ server::RunningServer& Server() {
     options.address = "127.0.0.1:0";
     options.metrics_address = "";
     auto started = server::StartServer(options);
-    if (!started.ok()) std::abort();
+    if (!started.ok()) Die(started.status());
     return started->release();
   }();
   return *running;
@@ -52,12 +58,12 @@ Connection Connect(uint64_t chunk_points) {
   options.address = "127.0.0.1:" + std::to_string(Server().port());
   options.chunk_points = chunk_points;
   auto connected = client::Client::Connect(options);
-  if (!connected.ok()) std::abort();
+  if (!connected.ok()) Die(connected.status());
   client::SessionOptions session_options;
   session_options.tree_max_depth = 9;
   session_options.keep_points_for_reupload = false;
   auto session = (*connected)->CreateSession(session_options);
-  if (!session.ok()) std::abort();
+  if (!session.ok()) Die(session.status());
   return {*std::move(connected), *std::move(session)};
 }
 

@@ -5,6 +5,9 @@
 
 #include <torch/torch.h>
 
+#include <cmath>
+#include <limits>
+
 #include "core/net/rpsr_modules.h"
 #include "gtest/gtest.h"
 
@@ -73,6 +76,20 @@ TEST(InferenceKernelsTest, KabschRotationEqualsTheDifferentiableHead) {
   EXPECT_LT((det - 1.0).abs().max().item<double>(), 1e-5);
 }
 
+TEST(InferenceKernelsTest, NonFiniteValuesPropagateLikeTheGenericOperators) {
+  torch::Tensor children = torch::relu(torch::randn({16, 4}));
+  children[3][1] = std::numeric_limits<float>::quiet_NaN();
+  torch::Tensor slots = torch::arange(16, torch::kInt64).reshape({2, 8});
+  torch::Tensor pooled = MaxOverSlots(children, slots);
+  EXPECT_TRUE(std::isnan(pooled[0][1].item<float>()));  // slot 3 of parent 0
+  EXPECT_FALSE(std::isnan(pooled[1][1].item<float>()));
+  torch::Tensor H = torch::randn({2, 3, 3}, torch::kFloat64);
+  H[1][0][0] = std::numeric_limits<double>::infinity();
+  torch::Tensor R = KabschRotation(H);
+  EXPECT_TRUE(torch::isfinite(R[0]).all().item<bool>());
+  EXPECT_TRUE(torch::isnan(R[1]).all().item<bool>());
+}
+
 TEST(InferenceKernelsTest, ChosenOnlyWithoutGradientOnCpuFloat) {
   torch::Tensor leaf = torch::randn({4, 4}).requires_grad_(true);
   EXPECT_FALSE(UseInferenceKernels(leaf));
@@ -88,15 +105,17 @@ TEST(InferenceKernelsTest, ChosenOnlyWithoutGradientOnCpuFloat) {
   }
 }
 
-// The whole encoder: the inference path gives the training path's depth-2 features.
+// A tree convolution and the pooling after it: the inference path gives the training path's
+// features (inputs that carry a gradient take the generic gather and pooling).
 TEST(InferenceKernelsTest, TreeConvolutionAndPoolingMatchTheTrainingPath) {
   torch::manual_seed(9);
   TreeConv conv(6, 32);
   conv->eval();
   torch::Tensor features = torch::randn({500, 6});
   torch::Tensor neighbors = IndicesWithEmpty(500, 500, 27, 13);
-  torch::Tensor slots = IndicesWithEmpty(90, 500, 8, 17);
-  torch::Tensor slow = PoolToParents(conv->forward(features, neighbors), slots);
+  torch::Tensor slots = IndicesWithEmpty(300, 500, 8, 17);  // above the pooling's grain of 256
+  torch::Tensor slow =
+      PoolToParents(conv->forward(features.clone().requires_grad_(true), neighbors), slots);
   torch::Tensor fast;
   {
     torch::InferenceMode inference;

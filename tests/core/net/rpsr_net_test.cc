@@ -3,6 +3,8 @@
 
 #include <torch/torch.h>
 
+#include <cmath>
+
 #include "core/net/rpsr_modules.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
@@ -132,6 +134,11 @@ TEST(RpsrNetTest, BadConfigIsRejected) {
   RpsrNetConfig config = SmallConfig();
   config.attention_heads = 5;
   EXPECT_EQ(RpsrNet::Create(config, 1).status().code(), absl::StatusCode::kInvalidArgument);
+  for (double cube : {-1.0, std::nan("")}) {
+    config = SmallConfig();
+    config.cube_half_length = cube;
+    EXPECT_EQ(RpsrNet::Create(config, 1).status().code(), absl::StatusCode::kInvalidArgument);
+  }
 }
 
 }  // namespace

@@ -99,6 +99,26 @@ TEST(TrainerTest, ResumingWithOtherArchitectureSaysWhatToDo) {
   EXPECT_THAT(result.status().message(), HasSubstr("resume with the flags"));
 }
 
+TEST(TrainerTest, ResumingWithAnotherCubeSaysWhatToDo) {
+  // The cube is not in the tensors' shapes: the saved config has to be compared.
+  const std::string dir = ::testing::TempDir() + "/trainer_test_cube";
+  fs::remove_all(dir);
+  RpsrNetConfig cropped = TinyConfig();
+  cropped.cube_half_length = 1.5;
+  auto net = RpsrNet::Create(cropped, 1);
+  ASSERT_TRUE(net.ok());
+  ASSERT_TRUE(TrainRpsrNet(**net, Stream(2), Stream(3), TinyOptions(dir, 1)).ok());
+  auto uncropped = RpsrNet::Create(TinyConfig(), 1);
+  ASSERT_TRUE(uncropped.ok());
+  auto result = TrainRpsrNet(**uncropped, Stream(2), Stream(3), TinyOptions(dir, 2));
+  EXPECT_EQ(result.status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(result.status().message(), HasSubstr("cube_half_length 1.5"));
+  // With the original cube it resumes.
+  auto same = RpsrNet::Create(cropped, 1);
+  ASSERT_TRUE(same.ok());
+  EXPECT_TRUE(TrainRpsrNet(**same, Stream(2), Stream(3), TinyOptions(dir, 2)).ok());
+}
+
 TEST(TrainerTest, RejectsBadOptions) {
   auto net = RpsrNet::Create(TinyConfig(), 1);
   ASSERT_TRUE(net.ok());

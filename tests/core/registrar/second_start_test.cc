@@ -16,7 +16,7 @@ namespace {
 using testing_util::SharedRegistrar;
 using testing_util::TreeOf;
 
-TEST(RegistrarSecondStartTest, KeepsTheBetterOfTheNetworksStartAndTheGuesss) {
+TEST(RegistrarSecondStartTest, KeepsTheBetterOfTheNetworksStartAndTheGuess) {
   LidarSequenceOptions sequence;
   sequence.frame_count = 40;
   sequence.seed = 7;
@@ -55,6 +55,9 @@ TEST(RegistrarSecondStartTest, KeepsTheBetterOfTheNetworksStartAndTheGuesss) {
     EXPECT_TRUE(both->valid) << "frame " << first << ": " << both->failure_reason;
   }
   std::printf("answers from the initial guess's start: %d of 4\n", from_guess);
+  // The object network is off its training distribution on scans: on these frames the second
+  // start has to win at least once (1 of 4 when written), or this test no longer covers it.
+  EXPECT_GE(from_guess, 1);
 }
 
 }  // namespace
