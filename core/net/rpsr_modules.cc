@@ -193,17 +193,30 @@ ContextTransformerImpl::ContextTransformerImpl(const RpsrNetConfig& config) {
 torch::Tensor ContextTransformerImpl::forward(const torch::Tensor& x, const torch::Tensor& x_empty,
                                               const torch::Tensor& y,
                                               const torch::Tensor& y_empty) {
+  return Attend(SelfAttended(x, x_empty), Memory(y, y_empty), y_empty);
+}
+
+torch::Tensor ContextTransformerImpl::Memory(const torch::Tensor& y, const torch::Tensor& y_empty) {
   // Sequence-first [T, B, E].
   torch::Tensor memory = y.transpose(0, 1);
   torch::Tensor n = enc_norm1_->forward(memory);
   memory = memory + std::get<0>(enc_attention_->forward(n, n, n, y_empty, false));
-  memory = memory + enc_feedforward_->forward(enc_norm2_->forward(memory));
+  return memory + enc_feedforward_->forward(enc_norm2_->forward(memory));
+}
 
+torch::Tensor ContextTransformerImpl::SelfAttended(const torch::Tensor& x,
+                                                   const torch::Tensor& x_empty) {
   torch::Tensor z = x.transpose(0, 1);
-  n = dec_norm1_->forward(z);
-  z = z + std::get<0>(dec_self_attention_->forward(n, n, n, x_empty, false));
-  n = dec_norm2_->forward(z);
-  z = z + std::get<0>(dec_cross_attention_->forward(n, memory, memory, y_empty, false));
+  torch::Tensor n = dec_norm1_->forward(z);
+  return z + std::get<0>(dec_self_attention_->forward(n, n, n, x_empty, false));
+}
+
+torch::Tensor ContextTransformerImpl::Attend(const torch::Tensor& self_attended,
+                                             const torch::Tensor& memory,
+                                             const torch::Tensor& memory_empty) {
+  torch::Tensor n = dec_norm2_->forward(self_attended);
+  torch::Tensor z = self_attended + std::get<0>(dec_cross_attention_->forward(n, memory, memory,
+                                                                              memory_empty, false));
   z = z + dec_feedforward_->forward(dec_norm3_->forward(z));
   return z.transpose(0, 1);
 }
@@ -244,12 +257,25 @@ RpsrNetworkImpl::RpsrNetworkImpl(const RpsrNetConfig& config) : config_(config) 
   transformer_ = register_module("transformer", ContextTransformer(config));
 }
 
+EncodedTarget RpsrNetworkImpl::EncodeTarget(const PackedClouds& target) {
+  EncodedTarget encoded;
+  encoded.embedding = Encode(target);
+  encoded.memory = transformer_->Memory(encoded.embedding, target.token_empty);
+  encoded.self_attended = transformer_->SelfAttended(encoded.embedding, target.token_empty);
+  return encoded;
+}
+
 PassOutput RpsrNetworkImpl::Pass(const PackedClouds& source, const PackedClouds& target,
-                                 const torch::Tensor& target_embedding) {
+                                 const EncodedTarget& encoded_target) {
   torch::Tensor fs = Encode(source);
-  const torch::Tensor& ft = target_embedding;
-  torch::Tensor src = fs + transformer_->forward(fs, source.token_empty, ft, target.token_empty);
-  torch::Tensor tgt = ft + transformer_->forward(ft, target.token_empty, fs, source.token_empty);
+  const torch::Tensor& ft = encoded_target.embedding;
+  // = transformer_(fs, source, ft, target) and transformer_(ft, target, fs, source), with the
+  // target-only steps taken from encoded_target.
+  torch::Tensor src = fs + transformer_->Attend(transformer_->SelfAttended(fs, source.token_empty),
+                                                encoded_target.memory, target.token_empty);
+  torch::Tensor tgt =
+      ft + transformer_->Attend(encoded_target.self_attended,
+                                transformer_->Memory(fs, source.token_empty), source.token_empty);
   const double scale = 1.0 / std::sqrt(static_cast<double>(config_.embedding_width));
   torch::Tensor logits = torch::matmul(src, tgt.transpose(1, 2)) * scale;  // [B, T, T]
   logits = logits.masked_fill(target.token_empty.unsqueeze(1), -1e9);

@@ -84,8 +84,17 @@ class ContextTransformerImpl : public torch::nn::Module {
  public:
   explicit ContextTransformerImpl(const RpsrNetConfig& config);
   // phi(x, y): the residual that makes x's embedding aware of y. x, y: [B, T, E].
+  // = Attend(SelfAttended(x, x_empty), Memory(y, y_empty), y_empty); the parts are separate so
+  // that what depends on the target alone is computed once per pair, not once per pass.
   torch::Tensor forward(const torch::Tensor& x, const torch::Tensor& x_empty,
                         const torch::Tensor& y, const torch::Tensor& y_empty);
+  // The encoder block over y: the memory x attends to. [T, B, E] (sequence-first).
+  torch::Tensor Memory(const torch::Tensor& y, const torch::Tensor& y_empty);
+  // The decoder's self-attention step over x [B, T, E]: x plus its residual, [T, B, E].
+  torch::Tensor SelfAttended(const torch::Tensor& x, const torch::Tensor& x_empty);
+  // The decoder's cross-attention to `memory` and feed-forward; returns [B, T, E].
+  torch::Tensor Attend(const torch::Tensor& self_attended, const torch::Tensor& memory,
+                       const torch::Tensor& memory_empty);
 
  private:
   torch::nn::LayerNorm enc_norm1_{nullptr}, enc_norm2_{nullptr};
@@ -104,7 +113,7 @@ std::pair<torch::Tensor, torch::Tensor> WeightedProcrustes(const torch::Tensor& 
                                                            const torch::Tensor& tgt,
                                                            const torch::Tensor& weights);
 
-// One pass: HFE of both clouds (the target's may be given precomputed), Transformer residuals,
+// One pass: HFE of the source (the target's is given, EncodedTarget), Transformer residuals,
 // scores (Eq. 3) with empty target tokens masked, soft correspondences and the SVD head.
 struct PassOutput {
   torch::Tensor rotation;     // [B, 3, 3], moved source -> target
@@ -112,12 +121,21 @@ struct PassOutput {
   torch::Tensor scores;       // [B, T, T]
 };
 
+// What a pass needs of the target, fixed over passes: its embedding and the two Transformer
+// steps that read the target alone (its encoder memory, its decoder self-attention).
+struct EncodedTarget {
+  torch::Tensor embedding;      // [B, T, E]
+  torch::Tensor memory;         // [T, B, E]
+  torch::Tensor self_attended;  // [T, B, E]
+};
+
 class RpsrNetworkImpl : public torch::nn::Module {
  public:
   explicit RpsrNetworkImpl(const RpsrNetConfig& config);
   torch::Tensor Encode(const PackedClouds& clouds) { return encoder_->forward(clouds); }
+  EncodedTarget EncodeTarget(const PackedClouds& target);
   PassOutput Pass(const PackedClouds& source, const PackedClouds& target,
-                  const torch::Tensor& target_embedding);
+                  const EncodedTarget& encoded_target);
   const RpsrNetConfig& config() const { return config_; }
 
  private:

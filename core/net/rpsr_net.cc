@@ -222,7 +222,7 @@ absl::StatusOr<std::vector<NetEstimate>> RpsrNet::Estimate(absl::Span<const NetP
         net::PackTargets(pairs, impl_->config.cube_half_length);
     if (!targets.ok()) return targets.status();
     const net::PackedClouds target = targets->To(impl_->device);
-    const torch::Tensor target_embedding = network->Encode(target);
+    const net::EncodedTarget encoded_target = network->EncodeTarget(target);
 
     std::vector<NetEstimate> results(pairs.size());
     std::vector<Eigen::Isometry3d> estimates;
@@ -234,7 +234,7 @@ absl::StatusOr<std::vector<NetEstimate>> RpsrNet::Estimate(absl::Span<const NetP
           net::PackMovedSources(pairs, estimates, impl_->config.cube_half_length);
       if (!sources.ok()) return sources.status();
       const net::PackedClouds source = sources->To(impl_->device);
-      net::PassOutput out = network->Pass(source, target, target_embedding);
+      net::PassOutput out = network->Pass(source, target, encoded_target);
       const std::vector<Eigen::Isometry3d> steps = net::ToIsometries(out.rotation, out.translation);
       for (size_t b = 0; b < pairs.size(); ++b) {
         estimates[b] = steps[b] * estimates[b];

@@ -297,7 +297,7 @@ absl::StatusOr<std::vector<EpochRecord>> TrainRpsrNet(
             net::PackTargets(batch, impl.config.cube_half_length);
         if (!targets.ok()) return targets.status();
         const net::PackedClouds target = targets->To(device);
-        torch::Tensor target_embedding = impl.network->Encode(target);
+        const net::EncodedTarget encoded_target = impl.network->EncodeTarget(target);
         std::vector<Eigen::Isometry3d> estimates(batch.size(), Eigen::Isometry3d::Identity());
         torch::Tensor loss = torch::zeros({1}, torch::TensorOptions().device(device));
         torch::Tensor rotation_loss, translation_loss;
@@ -305,7 +305,7 @@ absl::StatusOr<std::vector<EpochRecord>> TrainRpsrNet(
           absl::StatusOr<net::PackedClouds> sources =
               net::PackMovedSources(batch, estimates, impl.config.cube_half_length);
           if (!sources.ok()) return sources.status();
-          net::PassOutput out = impl.network->Pass(sources->To(device), target, target_embedding);
+          net::PassOutput out = impl.network->Pass(sources->To(device), target, encoded_target);
           // Compose with the (constant) estimate so far: T_k = step o T_{k-1}.
           torch::Tensor R_prev = ToTensor(estimates, true).to(device);
           torch::Tensor t_prev = ToTensor(estimates, false).to(device);

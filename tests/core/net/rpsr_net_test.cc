@@ -53,7 +53,7 @@ TEST(RpsrNetTest, ScoresIgnoreEmptyTargetTokens) {
   ASSERT_TRUE(source_input.ok() && target_input.ok());
   net::PackedClouds s = net::PackClouds({&*source_input});
   net::PackedClouds t = net::PackClouds({&*target_input});
-  net::PassOutput out = network->Pass(s, t, network->Encode(t));
+  net::PassOutput out = network->Pass(s, t, network->EncodeTarget(t));
   EXPECT_EQ(out.scores.sizes(), (std::vector<int64_t>{1, kNetTokens, kNetTokens}));
   torch::Tensor to_empty = out.scores.index({0, torch::indexing::Slice(), t.token_empty[0]});
   EXPECT_LT(to_empty.max().item<float>(), 1e-12f);
@@ -111,13 +111,14 @@ TEST(RpsrNetTest, BatchedPassEqualsOneByOneBeforeTheSvd) {
     inputs.push_back(*MakeNetInput(*tree));
   }
   net::PackedClouds all = net::PackClouds({&inputs[0], &inputs[1], &inputs[2]});
-  torch::Tensor all_embedding = network->Encode(all);
-  net::PassOutput all_out = network->Pass(all, all, all_embedding);
+  const net::EncodedTarget all_target = network->EncodeTarget(all);
+  const torch::Tensor& all_embedding = all_target.embedding;
+  net::PassOutput all_out = network->Pass(all, all, all_target);
   for (int i = 0; i < 3; ++i) {
     net::PackedClouds one = net::PackClouds({&inputs[i]});
-    torch::Tensor embedding = network->Encode(one);
-    EXPECT_TRUE(torch::allclose(embedding[0], all_embedding[i], 1e-5, 1e-6));
-    net::PassOutput out = network->Pass(one, one, embedding);
+    const net::EncodedTarget target = network->EncodeTarget(one);
+    EXPECT_TRUE(torch::allclose(target.embedding[0], all_embedding[i], 1e-5, 1e-6));
+    net::PassOutput out = network->Pass(one, one, target);
     EXPECT_TRUE(torch::allclose(out.scores[0], all_out.scores[i], 1e-5, 1e-7));
   }
 }
