@@ -200,8 +200,9 @@ absl::StatusOr<std::vector<Step>> RunLocally(const std::vector<std::string>& fra
     absl::StatusOr<core::PointCloud> current = reader.Next(i);
     if (!current.ok()) return current.status();
     const int depth = ChooseTreeDepth(*current, *previous, requested_depth);
-    const std::string mode = ChooseMode(*current, *previous, requested_mode,
-                                        model_flag.empty() ? "objects" : model_flag, nullptr);
+    const std::string mode =
+        ChooseMode(*current, *previous, requested_mode, model_flag.empty() ? "objects" : model_flag,
+                   nullptr, /*has_motion_prior=*/true);
     core::BarnesHutTreeOptions tree_options;
     tree_options.max_depth = depth;
     if (!previous_tree) {
@@ -258,7 +259,8 @@ absl::StatusOr<std::vector<Step>> RunOnServer(const std::vector<std::string>& fr
   if (!session.ok()) return session.status();
   TrackerOptions tracker_options;
   tracker_options.registration.mode =
-      ChooseMode(*first, *first, requested_mode, info->model_name, nullptr);
+      ChooseMode(*first, *first, requested_mode, info->model_name, nullptr,
+                 /*has_motion_prior=*/true);
   tracker_options.registration.passes = absl::GetFlag(FLAGS_passes);
   tracker_options.constant_velocity_prior = absl::GetFlag(FLAGS_constant_velocity);
   absl::StatusOr<std::unique_ptr<Tracker>> tracker = (*session)->StartTracker(tracker_options);

@@ -66,19 +66,25 @@ int ChooseTreeDepth(const core::PointCloud& source, const core::PointCloud& targ
 
 std::string ChooseMode(const core::PointCloud& source, const core::PointCloud& target,
                        const std::string& requested, const std::string& model_name,
-                       std::string* why) {
+                       std::string* why, bool has_motion_prior) {
   if (!requested.empty()) {
     if (why != nullptr) *why = "as asked";
     return requested;
   }
   const bool scene = IsSceneScale(source) || IsSceneScale(target);
-  if (scene && model_name.find("lidar") == std::string::npos) {
+  const bool object_model = model_name.find("lidar") == std::string::npos;
+  if (scene && object_model && has_motion_prior) {
     if (why != nullptr) {
-      *why = "scene-scale clouds and an object model: refinement from identity";
+      *why = "scene-scale clouds, an object model and a motion prior: refinement from the prior";
     }
     return "refine";
   }
-  if (why != nullptr) *why = "the default";
+  if (why != nullptr) {
+    *why = scene && object_model
+               ? "the default; scene-scale clouds and an object model: the refinement starts "
+                 "from the network's estimate and, unless that is confident, from the identity"
+               : "the default";
+  }
   return "net+refine";
 }
 

@@ -47,12 +47,16 @@ bool IsSceneScale(const core::PointCloud& cloud);
 // for scenes (~0.5 m cells on a 240 m cube, where the refinement is accurate).
 int ChooseTreeDepth(const core::PointCloud& source, const core::PointCloud& target, int requested);
 
-// Mode: `requested` when not empty; else net+refine for objects and, for scenes, refine (from
-// identity) unless the model is a LiDAR model, since the shipped network is trained on objects
-// only. `why` (may be null) receives a short reason for the choice.
+// Mode: `requested` when not empty; else net+refine, except for scene-scale clouds with a
+// non-LiDAR model when a motion prior will be given (`has_motion_prior`: odometry's previous
+// motion), where it is refine from that prior: the shipped network knows objects only, and
+// net+refine's second start (from the prior) would only add its cost to frames the prior already
+// solves. Without a prior, net+refine's two starts (the network's estimate and the identity) are
+// as accurate as refine from the identity or better on scans (README, KITTI-style table). `why`
+// (may be null) receives a short reason for the choice.
 std::string ChooseMode(const core::PointCloud& source, const core::PointCloud& target,
                        const std::string& requested, const std::string& model_name,
-                       std::string* why);
+                       std::string* why, bool has_motion_prior = false);
 
 // "R =\n ...\nt = ..." block with the quaternion, validity, confidence, fit and time; with the
 // rotation/translation error against `truth` when set.

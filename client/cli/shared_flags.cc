@@ -46,8 +46,8 @@ ABSL_FLAG(std::string, model, "",
 ABSL_FLAG(std::string, mode, "net+refine",
           "eval, register, odometry: net: the network alone; net+refine (eval's default): the "
           "network, then the multi-scale GICP on the trees (core/refine); refine: the refinement "
-          "alone from the identity (register and odometry choose net+refine for objects and "
-          "refine for LiDAR scenes with the object model when not given)");
+          "alone from the identity (when not given: net+refine, except odometry on LiDAR scenes "
+          "with the object model: refine from the previous motion)");
 ABSL_FLAG(int, tree_depth, 6,
           "depth of the trees built from the clouds (>= 5); register and odometry choose 6 for "
           "objects and 9 for LiDAR scenes when not given");
