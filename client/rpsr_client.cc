@@ -352,7 +352,6 @@ class SessionState {
     return session_id_;
   }
   const SessionOptions& options() const { return effective_; }
-  ClientChannel& channel() { return *channel_; }
   std::shared_ptr<ClientChannel> shared_channel() { return channel_; }
   const std::string& affinity_key() const { return affinity_key_; }
 

@@ -20,6 +20,7 @@
 #include "client/cli/shared_flags.h"
 #include "client/cli/subcommands.h"
 #include "client/rpsr_client.h"
+#include "core/data/registration_metrics.h"
 #include "server/rpsr_server.h"
 
 namespace rpsr::client {
@@ -123,9 +124,10 @@ int RunDemoCommand(const std::vector<std::string>& args) {
       std::printf("%s", FormatReportText(report).c_str());
       if (pair->T_target_source) {
         const Eigen::Vector3d t = pair->T_target_source->translation();
-        std::printf("truth: rotation %.2f deg, t = % .4f % .4f % .4f\n",
-                    PoseErrorOf(Eigen::Isometry3d::Identity(), *pair->T_target_source).rotation_deg,
-                    t.x(), t.y(), t.z());
+        std::printf(
+            "truth: rotation %.2f deg, t = % .4f % .4f % .4f\n",
+            core::ErrorOf(Eigen::Isometry3d::Identity(), *pair->T_target_source).rotation_deg,
+            t.x(), t.y(), t.z());
       }
       std::printf(
           "picture: %s (from above; left as given, right aligned; blue target, red "

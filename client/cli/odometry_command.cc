@@ -202,7 +202,7 @@ absl::StatusOr<std::vector<Step>> RunLocally(const std::vector<std::string>& fra
     const int depth = ChooseTreeDepth(*current, *previous, requested_depth);
     const std::string mode =
         ChooseMode(*current, *previous, requested_mode, model_flag.empty() ? "objects" : model_flag,
-                   nullptr, /*has_motion_prior=*/true);
+                   nullptr, absl::GetFlag(FLAGS_constant_velocity));
     core::BarnesHutTreeOptions tree_options;
     tree_options.max_depth = depth;
     if (!previous_tree) {
@@ -258,9 +258,8 @@ absl::StatusOr<std::vector<Step>> RunOnServer(const std::vector<std::string>& fr
   absl::StatusOr<std::unique_ptr<Session>> session = (*client)->CreateSession(session_options);
   if (!session.ok()) return session.status();
   TrackerOptions tracker_options;
-  tracker_options.registration.mode =
-      ChooseMode(*first, *first, requested_mode, info->model_name, nullptr,
-                 /*has_motion_prior=*/true);
+  tracker_options.registration.mode = ChooseMode(*first, *first, requested_mode, info->model_name,
+                                                 nullptr, absl::GetFlag(FLAGS_constant_velocity));
   tracker_options.registration.passes = absl::GetFlag(FLAGS_passes);
   tracker_options.constant_velocity_prior = absl::GetFlag(FLAGS_constant_velocity);
   absl::StatusOr<std::unique_ptr<Tracker>> tracker = (*session)->StartTracker(tracker_options);

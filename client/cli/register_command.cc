@@ -58,23 +58,20 @@ absl::StatusOr<Eigen::Isometry3d> ParseTruth(const std::string& text) {
 #if RPSR_CLI_HAS_SERVICE
 absl::StatusOr<PairReport> RegisterOnServer(const core::PointCloud& source,
                                             const core::PointCloud& target,
-                                            const std::string& requested_mode, int tree_depth,
-                                            std::string* mode_used) {
+                                            const std::string& requested_mode, int tree_depth) {
   absl::StatusOr<ClientOptions> options = ClientOptionsFromFlags();
   if (!options.ok()) return options.status();
   absl::StatusOr<std::unique_ptr<Client>> client = Client::Connect(*options);
   if (!client.ok()) return client.status();
   absl::StatusOr<ServerInfo> info = (*client)->GetServerInfo();
   if (!info.ok()) return info.status();
-  std::string why;
-  *mode_used = ChooseMode(source, target, requested_mode, info->model_name, &why);
   SessionOptions session_options;
-  session_options.tree_max_depth = ChooseTreeDepth(source, target, tree_depth);
+  session_options.tree_max_depth = tree_depth;
   session_options.keep_points_for_reupload = false;
   absl::StatusOr<std::unique_ptr<Session>> session = (*client)->CreateSession(session_options);
   if (!session.ok()) return session.status();
   RegisterOptions register_options;
-  register_options.mode = *mode_used;
+  register_options.mode = ChooseMode(source, target, requested_mode, info->model_name, nullptr);
   register_options.passes = absl::GetFlag(FLAGS_passes);
   absl::StatusOr<RegistrationResult> result =
       (*session)->Register(source.points, target.points, register_options);
@@ -111,18 +108,16 @@ int RunRegisterCommand(const std::vector<std::string>& args) {
   const int tree_depth = ChooseTreeDepth(*source, *target, ExplicitTreeDepthFlag());
 
   absl::StatusOr<PairReport> report;
-  std::string mode;
   if (*use_server) {
 #if RPSR_CLI_HAS_SERVICE
-    report = RegisterOnServer(*source, *target, requested_mode, tree_depth, &mode);
+    report = RegisterOnServer(*source, *target, requested_mode, tree_depth);
 #else
     return Fail(kBadFlags, "this rpsr was built without the client library (core-only build)");
 #endif
   } else {
     const std::string model_flag = absl::GetFlag(FLAGS_model);
-    std::string why;
-    mode = ChooseMode(*source, *target, requested_mode, model_flag.empty() ? "objects" : model_flag,
-                      &why);
+    const std::string mode = ChooseMode(*source, *target, requested_mode,
+                                        model_flag.empty() ? "objects" : model_flag, nullptr);
     absl::StatusOr<std::unique_ptr<core::Registrar>> registrar =
         core::Registrar::Create(RegistrarConfigFromModelFlag(model_flag));
     if (!registrar.ok()) return Fail(kFailure, std::string(registrar.status().message()));

@@ -88,11 +88,6 @@ std::string ChooseMode(const core::PointCloud& source, const core::PointCloud& t
   return "net+refine";
 }
 
-PoseError PoseErrorOf(const Eigen::Isometry3d& estimate, const Eigen::Isometry3d& truth) {
-  const core::PairError error = core::ErrorOf(estimate, truth);
-  return {error.rotation_deg, error.translation};
-}
-
 std::string FormatReportText(const PairReport& report) {
   const Eigen::Matrix3d R = report.T_target_source.linear();
   const Eigen::Vector3d t = report.T_target_source.translation();
@@ -114,7 +109,7 @@ std::string FormatReportText(const PairReport& report) {
     absl::StrAppend(&out, "reason: ", report.failure_reason, "\n");
   }
   if (report.truth) {
-    const PoseError error = PoseErrorOf(report.T_target_source, *report.truth);
+    const core::PairError error = core::ErrorOf(report.T_target_source, *report.truth);
     absl::StrAppendFormat(&out, "error vs truth: rotation %.3f deg, translation %.4g\n",
                           error.rotation_deg, error.translation);
   }
@@ -137,7 +132,7 @@ std::string FormatReportJson(const PairReport& report) {
       ", \"iterations\": ", report.iterations, ", \"mode\": ", JsonString(report.mode),
       ", \"seconds\": ", absl::StrFormat("%.6f", report.seconds));
   if (report.truth) {
-    const PoseError error = PoseErrorOf(report.T_target_source, *report.truth);
+    const core::PairError error = core::ErrorOf(report.T_target_source, *report.truth);
     absl::StrAppendFormat(&out, ", \"rotation_error_deg\": %.9g, \"translation_error\": %.9g",
                           error.rotation_deg, error.translation);
   }

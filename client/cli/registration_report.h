@@ -64,13 +64,6 @@ std::string FormatReportText(const PairReport& report);
 // One JSON object (no trailing newline).
 std::string FormatReportJson(const PairReport& report);
 
-// Rotation error (degrees) and translation error (cloud units) of `estimate` against `truth`.
-struct PoseError {
-  double rotation_deg = 0.0;
-  double translation = 0.0;
-};
-PoseError PoseErrorOf(const Eigen::Isometry3d& estimate, const Eigen::Isometry3d& truth);
-
 std::string JsonString(const std::string& text);
 
 // Builds both trees (depth `tree_depth`) and registers in this process; the report's seconds

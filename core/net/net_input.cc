@@ -87,9 +87,8 @@ absl::StatusOr<NetCloudInput> Rebinned(const Octree& cloud, const Eigen::Isometr
                                        bool crop) {
   const Octree::Level& level = cloud.level(std::min(cloud.max_depth(), kMovedSourceDepth));
   std::vector<Eigen::Vector3f> moved;
-  std::vector<uint32_t> counts;
+  std::vector<uint32_t> kept_counts;  // only when cropping; otherwise the level's own counts
   moved.reserve(level.size());
-  counts.reserve(level.size());
   const Eigen::Isometry3f Tf = T.cast<float>();
   const Eigen::Vector3f c = center.cast<float>();
   // Strictly inside, so that no kept point is clamped into a border cell.
@@ -98,7 +97,7 @@ absl::StatusOr<NetCloudInput> Rebinned(const Octree& cloud, const Eigen::Isometr
     const Eigen::Vector3f p = Tf * level.center_of_mass[i];
     if (crop && (p - c).cwiseAbs().maxCoeff() >= limit) continue;
     moved.push_back(p);
-    counts.push_back(level.count[i]);
+    if (crop) kept_counts.push_back(level.count[i]);
   }
   if (moved.empty()) {
     return absl::FailedPreconditionError(
@@ -111,8 +110,8 @@ absl::StatusOr<NetCloudInput> Rebinned(const Octree& cloud, const Eigen::Isometr
   options.neighbor_max_depth = kNetLeafDepth;
   options.cube_center = {center.x(), center.y(), center.z()};
   options.cube_half_length = half_length;
-  absl::StatusOr<Octree> rebinned =
-      BuildWeightedBarnesHutTree<3>(absl::MakeConstSpan(moved), counts, options);
+  absl::StatusOr<Octree> rebinned = BuildWeightedBarnesHutTree<3>(
+      absl::MakeConstSpan(moved), crop ? kept_counts : level.count, options);
   if (!rebinned.ok()) return rebinned.status();
   return MakeNetInput(*rebinned);
 }

@@ -190,12 +190,6 @@ ContextTransformerImpl::ContextTransformerImpl(const RpsrNetConfig& config) {
   dec_feedforward_ = register_module("dec_feedforward", FeedForward(e, config.feedforward_width));
 }
 
-torch::Tensor ContextTransformerImpl::forward(const torch::Tensor& x, const torch::Tensor& x_empty,
-                                              const torch::Tensor& y,
-                                              const torch::Tensor& y_empty) {
-  return Attend(SelfAttended(x, x_empty), Memory(y, y_empty), y_empty);
-}
-
 torch::Tensor ContextTransformerImpl::Memory(const torch::Tensor& y, const torch::Tensor& y_empty) {
   // Sequence-first [T, B, E].
   torch::Tensor memory = y.transpose(0, 1);

@@ -83,11 +83,9 @@ TORCH_MODULE(HierarchicalEncoder);
 class ContextTransformerImpl : public torch::nn::Module {
  public:
   explicit ContextTransformerImpl(const RpsrNetConfig& config);
-  // phi(x, y): the residual that makes x's embedding aware of y. x, y: [B, T, E].
-  // = Attend(SelfAttended(x, x_empty), Memory(y, y_empty), y_empty); the parts are separate so
+  // phi(x, y), the residual that makes x's embedding aware of y (x, y: [B, T, E]), is
+  // Attend(SelfAttended(x, x_empty), Memory(y, y_empty), y_empty); the parts are separate so
   // that what depends on the target alone is computed once per pair, not once per pass.
-  torch::Tensor forward(const torch::Tensor& x, const torch::Tensor& x_empty,
-                        const torch::Tensor& y, const torch::Tensor& y_empty);
   // The encoder block over y: the memory x attends to. [T, B, E] (sequence-first).
   torch::Tensor Memory(const torch::Tensor& y, const torch::Tensor& y_empty);
   // The decoder's self-attention step over x [B, T, E]: x plus its residual, [T, B, E].

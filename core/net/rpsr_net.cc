@@ -23,8 +23,11 @@ std::string ConfigToText(const RpsrNetConfig& c) {
       "conv_widths=", c.conv_widths[0], ",", c.conv_widths[1], ",", c.conv_widths[2],
       "\nembedding_width=", c.embedding_width, "\nattention_heads=", c.attention_heads,
       "\nfeedforward_width=", c.feedforward_width, "\npasses=", c.passes,
-      // %.17g: the value survives the text round trip exactly (resuming compares it).
-      c.cube_half_length > 0 ? absl::StrFormat("\ncube_half_length=%.17g", c.cube_half_length) : "",
+      // %.17g: the value survives the text round trip exactly (resuming compares it). Written
+      // whenever not 0 (the default, left out so that older files stay as they were), so that
+      // ConfigFromText rejects a negative or NaN value on its way through Create.
+      c.cube_half_length != 0.0 ? absl::StrFormat("\ncube_half_length=%.17g", c.cube_half_length)
+                                : "",
       "\n");
 }
 
@@ -147,11 +150,6 @@ RpsrNet::~RpsrNet() = default;
 
 absl::StatusOr<std::unique_ptr<RpsrNet>> RpsrNet::Create(const RpsrNetConfig& config,
                                                          uint64_t seed) {
-  if (!(config.cube_half_length >= 0) || !std::isfinite(config.cube_half_length)) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("cube_half_length must be finite and >= 0 (0: each target's own cube); got ",
-                     config.cube_half_length));
-  }
   absl::StatusOr<RpsrNetConfig> checked = net::ConfigFromText(net::ConfigToText(config));
   if (!checked.ok()) return checked.status();
   try {

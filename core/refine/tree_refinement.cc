@@ -417,7 +417,8 @@ std::string DegeneracyReason(const TreeRefinementResult& result) {
                                    : absl::StrCat("; mostly ", absl::StrJoin(axes, ", ")));
 }
 
-// The depths visited (coarsest, finest), options' -1 resolved.
+}  // namespace
+
 std::pair<int, int> StageDepths(const Octree& source, const Octree& target,
                                 const TreeRefinementOptions& options) {
   const int deepest = std::min(source.max_depth(), target.max_depth());
@@ -425,8 +426,6 @@ std::pair<int, int> StageDepths(const Octree& source, const Octree& target,
   const int coarsest = options.coarsest_depth < 0 ? std::min(finest, 3) : options.coarsest_depth;
   return {coarsest, finest};
 }
-
-}  // namespace
 
 absl::Status ValidateTreeRefinement(const Octree& source, const Octree& target,
                                     const Eigen::Isometry3d& initial_T_target_source,

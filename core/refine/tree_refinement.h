@@ -31,6 +31,7 @@
 
 #include <array>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "Eigen/Core"
@@ -184,6 +185,11 @@ struct TreeRefinementResult {
   std::vector<DepthStage> stages;  // coarse to fine
   double total_seconds = 0.0;
 };
+
+// The depths RefineOnTrees visits, {coarsest, finest}, with the options' -1 resolved (finest: the
+// deepest depth both trees hold; coarsest: depth 3, or the finest if shallower).
+std::pair<int, int> StageDepths(const Octree& source, const Octree& target,
+                                const TreeRefinementOptions& options);
 
 // The input checks of RefineOnTrees alone (the errors listed below), so that a caller can reject
 // a request before spending time on it.

@@ -12,6 +12,7 @@
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "core/data/registration_metrics.h"
 #include "core/io/file_bytes.h"
 #include "core/net/rpsr_net.h"
 #include "core/registrar/confidence_model.h"
@@ -37,9 +38,8 @@ bool Better(const TreeRefinementResult& a, const TreeRefinementResult& b) {
 absl::StatusOr<TreeRefinementResult> RefineWithFallback(const Octree& source, const Octree& target,
                                                         const Eigen::Isometry3d& from,
                                                         const TreeRefinementOptions& options) {
-  const int finest = options.finest_depth >= 0 ? options.finest_depth
-                                               : std::min(source.max_depth(), target.max_depth());
-  if (options.coarsest_depth >= 0 || options.evaluate_only || finest - 4 <= 3) {
+  const auto [coarsest, finest] = StageDepths(source, target, options);
+  if (options.coarsest_depth >= 0 || options.evaluate_only || finest - 4 <= coarsest) {
     return RefineOnTrees(source, target, from, options);
   }
   TreeRefinementOptions finer_start = options;
@@ -67,9 +67,8 @@ constexpr double kConfidentEnough = 0.9;
 // Two starts closer than this converge to the same result: 0.25 degrees and 0.25% of the
 // target cube's half-length.
 bool NearlyEqual(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b, const Octree& target) {
-  const Eigen::Isometry3d d = a.inverse() * b;
-  const double angle = Eigen::AngleAxisd(d.linear()).angle();
-  return angle < 0.25 * M_PI / 180.0 && d.translation().norm() < 0.0025 * target.half_length();
+  const PairError d = ErrorOf(a, b);
+  return d.rotation_deg < 0.25 && d.translation < 0.0025 * target.half_length();
 }
 
 using Clock = std::chrono::steady_clock;

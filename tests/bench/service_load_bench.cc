@@ -77,19 +77,15 @@ struct Measurement {
   double pairs = 0.0;  // answered pairs (a call may carry several)
 
   double throughput() const { return pairs / seconds; }
-  double Percentile(double q) const {
-    if (latencies.empty()) return 0.0;
-    std::vector<double> sorted = latencies;
-    std::sort(sorted.begin(), sorted.end());
-    const size_t index = std::min(sorted.size() - 1, static_cast<size_t>(q * sorted.size()));
-    return sorted[index];
-  }
+  double Percentile(double q) const { return PercentileOf(latencies, q, 0.0); }
   double mean_batch() const { return latencies.empty() ? 0.0 : batch_size_sum / latencies.size(); }
-  double AddedPercentile(double q) const {
-    if (added.empty()) return -1.0;
-    std::vector<double> sorted = added;
-    std::sort(sorted.begin(), sorted.end());
-    return sorted[std::min(sorted.size() - 1, static_cast<size_t>(q * sorted.size()))];
+  double AddedPercentile(double q) const { return PercentileOf(added, q, -1.0); }
+
+ private:
+  static double PercentileOf(std::vector<double> values, double q, double if_empty) {
+    if (values.empty()) return if_empty;
+    std::sort(values.begin(), values.end());
+    return values[std::min(values.size() - 1, static_cast<size_t>(q * values.size()))];
   }
 };
 

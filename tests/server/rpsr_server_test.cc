@@ -804,7 +804,6 @@ TEST(ServerAuthTest, ServesOverTls) {
   v1::UploadCloudResponse response;
   EXPECT_TRUE(secure.Upload(session, SmallCloud(), &response).ok());
   // A plaintext client cannot talk to it.
-  grpc::ChannelArguments quick;
   ServiceTestClient plain(server->target());
   grpc::ClientContext context;
   plain.Prepare(&context, 2.0);

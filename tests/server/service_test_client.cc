@@ -14,7 +14,9 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
 #include "grpcpp/generic/generic_stub.h"
+#include "gtest/gtest.h"
 #include "server/cloud_assembler.h"
+#include "server/proto_convert.h"
 
 namespace rpsr::server::testing {
 
@@ -223,17 +225,18 @@ std::optional<double> MetricValue(const std::string& text, const std::string& na
 }
 
 Eigen::Isometry3d TransformOf(const v1::RigidTransform& proto) {
-  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-  if (proto.rotation_size() == 9) {
-    for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 3; ++c) T.linear()(r, c) = proto.rotation(3 * r + c);
-    }
+  // The server always sends both; an absent one must fail the test, not read as the identity.
+  if (proto.rotation_size() != 9 || proto.translation_size() != 3) {
+    ADD_FAILURE() << "transform without a full rotation and translation: "
+                  << proto.ShortDebugString();
+    return Eigen::Isometry3d::Identity();
   }
-  if (proto.translation_size() == 3) {
-    T.translation() =
-        Eigen::Vector3d(proto.translation(0), proto.translation(1), proto.translation(2));
+  absl::StatusOr<Eigen::Isometry3d> T = TransformFromProto(proto, "transform");
+  if (!T.ok()) {
+    ADD_FAILURE() << T.status();
+    return Eigen::Isometry3d::Identity();
   }
-  return T;
+  return *T;
 }
 
 }  // namespace rpsr::server::testing

@@ -62,6 +62,7 @@ std::optional<double> MetricValue(
     const std::string& text, const std::string& name,
     const std::vector<std::pair<std::string, std::string>>& labels = {});
 
+// The transform of a response; a missing or invalid rotation or translation fails the test.
 Eigen::Isometry3d TransformOf(const v1::RigidTransform& proto);
 
 }  // namespace rpsr::server::testing

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "absl/strings/match.h"
 #include "core/data/object_pairs.h"
 #include "core/data/registration_metrics.h"
 #include "core/data/transform_convention.h"
@@ -36,7 +37,8 @@ TEST(EmbeddedModelsTest, ObjectsModelIsEmbedded) {
   auto model = FindEmbeddedModel("objects");
   ASSERT_TRUE(model.ok()) << model.status();
   EXPECT_GT(model->weights.size(), 1000000u);
-  // The shipped weights' magic (weights_file.h) starts the blob: the bytes are the file's.
+  // The shipped weights' magic (weights_file.cc) starts the blob: the bytes are the file's.
+  EXPECT_TRUE(absl::StartsWith(model->weights, "RPSRW001"));
   auto missing = FindEmbeddedModel("no-such-model");
   EXPECT_EQ(missing.status().code(), absl::StatusCode::kNotFound);
   EXPECT_THAT(missing.status().message(), HasSubstr("objects"));
