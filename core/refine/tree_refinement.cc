@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -246,6 +247,11 @@ struct Linearization {
   double inlier_sq_sum = 0.0;  // count-weighted squared plane distances
   int inlier_nodes = 0;
   double robust_sum = 0.0;  // sum of the correspondences' robust weights
+  // The robust cost the iterations decrease: sum over the used source nodes of their prior weight
+  // times the Geman-McClure rho(e^2) = c^2 e^2 / (c^2 + e^2) of the Mahalanobis distance, an
+  // unmatched node counting the kernel's ceiling c^2 (and the target's mean inverse density), so
+  // that costs under different correspondence sets compare.
+  double cost = 0.0;
 };
 
 double FitnessOf(const Linearization& lin) {
@@ -282,12 +288,19 @@ Linearization Linearize(const Octree& source, const Octree& target, DepthData& d
     corr.push_back(c);
   }
   lin.correspondences = static_cast<int>(corr.size());
+  const double c2 =
+      options.robust_scale_cells * options.robust_scale_cells / (2.0 * options.covariance_epsilon);
+  const double mean_target_density = 1.0 / static_cast<double>(std::max<size_t>(t_level.size(), 1));
+  for (double prior : data.source_prior) {
+    const double unmatched = options.weights == WeightScheme::kInverseDensity
+                                 ? prior * mean_target_density
+                                 : prior;
+    lin.cost += unmatched * c2;  // matched nodes replace their share below
+  }
   if (corr.empty() || !(prior_sum > 0.0)) return lin;
 
   // Prior weights rescaled to average 1, so H reads as "one measurement per correspondence".
   const double prior_scale = static_cast<double>(corr.size()) / prior_sum;
-  const double c2 =
-      options.robust_scale_cells * options.robust_scale_cells / (2.0 * options.covariance_epsilon);
   const double inlier_distance = options.inlier_distance_cells * data.edge_target;
   double weight_sum = 0.0;
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
@@ -303,6 +316,10 @@ Linearization Linearize(const Octree& source, const Octree& target, DepthData& d
     const Eigen::Vector3d r = c.target_mean - c.moved;
     const double e2 = r.dot(c.information * r);
     const double g = c2 / (c2 + e2);
+    const double unmatched = options.weights == WeightScheme::kInverseDensity
+                                 ? data.source_prior[c.k] * mean_target_density
+                                 : data.source_prior[c.k];
+    lin.cost += c.weight * c2 * e2 / (c2 + e2) - unmatched * c2;
     c.robust = g * g;
     lin.robust_sum += c.robust;
     c.weight *= prior_scale * c.robust;
@@ -387,20 +404,21 @@ absl::Status ValidateInputs(const Octree& source, const Octree& target,
         "RefineOnTrees: the initial transform's 3x3 block is not a rotation");
   }
   if (o.max_iterations_per_depth <= 0 || o.max_source_nodes_per_depth <= 0 ||
-      o.min_count_for_covariance < 0) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("RefineOnTrees: max_iterations_per_depth (", o.max_iterations_per_depth,
-                     ") and max_source_nodes_per_depth (", o.max_source_nodes_per_depth,
-                     ") must be positive, min_count_for_covariance non-negative"));
+      o.max_rebin_rounds <= 0 || o.min_count_for_covariance < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "RefineOnTrees: max_iterations_per_depth (", o.max_iterations_per_depth,
+        "), max_source_nodes_per_depth (", o.max_source_nodes_per_depth, ") and max_rebin_rounds (",
+        o.max_rebin_rounds, ") must be positive, min_count_for_covariance non-negative"));
   }
   if (!(o.rotation_epsilon_rad > 0) || !(o.translation_epsilon_cells > 0) ||
       !(o.max_correspondence_distance_cells > 0) || !(o.covariance_epsilon > 0) ||
-      !(o.covariance_epsilon <= 1) || !(o.robust_scale_cells > 0) ||
+      !(o.covariance_epsilon <= 1) || !(o.coarse_covariance_epsilon > 0) ||
+      !(o.coarse_covariance_epsilon <= 1) || !(o.robust_scale_cells > 0) ||
       !(o.inlier_distance_cells > 0) || !(o.fitness_min_mean_count >= 0) || !(o.damping >= 0) ||
       !(o.coarse_epsilon_factor >= 1) || !(o.degeneracy_threshold >= 0) || !(o.min_fitness >= 0)) {
     return absl::InvalidArgumentError(
-        "RefineOnTrees: epsilons, distances and scales must be positive (covariance_epsilon in "
-        "(0, 1]); damping, degeneracy_threshold and min_fitness non-negative");
+        "RefineOnTrees: epsilons, distances and scales must be positive (covariance_epsilon and "
+        "coarse_covariance_epsilon in (0, 1]); damping, degeneracy_threshold and min_fitness non-negative");
   }
   return absl::OkStatus();
 }
@@ -415,6 +433,132 @@ std::string DegeneracyReason(const TreeRefinementResult& result) {
                       "threshold)",
                       axes.empty() ? std::string(", mixing several axes")
                                    : absl::StrCat("; mostly ", absl::StrJoin(axes, ", ")));
+}
+
+// A coarse stage's source cells re-binned on the target's grid: the source's `from_depth` nodes,
+// moved by (R, t) into the target frame, weighted by their counts and binned to `to_depth` in the
+// target's cube. The result lives in the TARGET frame. (Why: two independently placed grids cut
+// a surface into different patches, so the source's own coarse CoMs are not the target's even at
+// the true pose, and a coarse stage fitted to them drifts along weakly constrained directions
+// (the hinge of a laptop, the axis of a spring) by up to a cell, which the finer stages, seeing
+// only a cell around each node, cannot undo. Binned on the same grid, the true pose makes the two
+// trees' cells hold the same part of the surface: Eq. 2's cost is then minimal at the truth,
+// which is what the network's passes do too when they re-encode the moved source.)
+absl::StatusOr<Octree> RebinOnTargetCells(const Octree& source, int from_depth, int to_depth,
+                                          const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
+                                          const Octree& target) {
+  const Octree::Level& fine = source.level(from_depth);
+  const Octree::VectorD& c = target.center();
+  const double r = target.half_length();
+  std::vector<Eigen::Vector3f> moved;
+  std::vector<uint32_t> counts;
+  std::vector<Octree::PackedSymmetric> spreads;
+  moved.reserve(fine.size());
+  counts.reserve(fine.size());
+  spreads.reserve(fine.size());
+  for (size_t i = 0; i < fine.size(); ++i) {
+    const Eigen::Vector3d q = R * fine.center_of_mass[i].cast<double>() + t;
+    // Outside the target's cube nothing corresponds; clamped into its border cells, these nodes
+    // would pull the border CoMs away from the target's.
+    if ((q - c).cwiseAbs().maxCoeff() > r) continue;
+    moved.push_back(q.cast<float>());
+    counts.push_back(fine.count[i]);
+    // The node's own spread, turned into the target frame (the cell's shape is what the
+    // refinement's plane-to-plane residuals read; CoMs alone would leave a cell of a few
+    // children without a reliable normal).
+    const Eigen::Matrix3d C = R * source.Covariance(from_depth, static_cast<int>(i))
+                                      .cast<double>() * R.transpose();
+    spreads.push_back(Octree::PackedSymmetric(C(0, 0), C(0, 1), C(0, 2), C(1, 1), C(1, 2),
+                                              C(2, 2)));
+  }
+  if (moved.empty()) {
+    return absl::InvalidArgumentError("no source node inside the target's cube");
+  }
+  BarnesHutTreeOptions options;
+  options.max_depth = to_depth;
+  options.neighbor_max_depth = -1;
+  options.cube_center = {c[0], c[1], c[2]};
+  options.cube_half_length = r;
+  return BuildWeightedBarnesHutTree<3>(moved, counts, spreads, options);
+}
+
+// A re-binned stage that moved the source by more than this many cells is re-binned at its new
+// pose and run again (its cells no longer coincide with the target's).
+constexpr double kRebinAgainCells = 0.25;
+// A re-binned depth d is built from the source's nodes at depth min(finest, d + this).
+constexpr int kRebinFromDepthsBelow = 3;
+
+struct StageOutcome {
+  Linearization lin;      // at the last iterate (the final transform at the finest depth)
+  bool singular = false;  // the normal equations had no solution
+};
+
+// Gauss-Newton iterations of one depth from (R, t), updated in place. At the finest depth with
+// step_control, Levenberg-Marquardt: a step that raises the robust cost (Linearization::cost) is
+// taken back and the damping raised tenfold, an accepted one lowers it again (there the plain
+// iteration oscillated between two correspondence sets and stopped wherever the budget ran out).
+// The returned linearisation is at the final transform: it feeds the information matrix, fitness
+// and RMSE.
+StageOutcome RunStage(const Octree& source, const Octree& target, DepthData& data, bool is_finest,
+                      const TreeRefinementOptions& options, std::vector<Correspondence>& corr,
+                      Eigen::Matrix3d& R, Eigen::Vector3d& t, DepthStage& stage,
+                      TreeRefinementResult& result) {
+  StageOutcome outcome;
+  // A coarser depth only has to hand the next one an error well inside a cell: looser test.
+  const double loosen = is_finest ? 1.0 : options.coarse_epsilon_factor;
+  const double rotation_epsilon = loosen * options.rotation_epsilon_rad;
+  const double translation_epsilon = loosen * options.translation_epsilon_cells * data.edge_target;
+  Linearization& lin = outcome.lin;
+  lin = Linearize(source, target, data, R, t, options, corr);
+  stage.correspondences = lin.correspondences;
+  if (options.evaluate_only) return outcome;
+  double damping = options.damping;
+  for (int iteration = 0; iteration < options.max_iterations_per_depth; ++iteration) {
+    if (lin.correspondences < options.min_correspondences) break;
+    Matrix6d H = lin.H;
+    const double mean_diag = H.diagonal().mean();
+    H.diagonal().array() += damping * mean_diag;
+    const Vector6d delta = H.ldlt().solve(-lin.b);
+    if (!delta.allFinite() || !(mean_diag > 0)) {
+      outcome.singular = true;
+      return outcome;
+    }
+    const Eigen::Vector3d w = delta.head<3>();
+    const Eigen::Vector3d v = delta.tail<3>();
+    const double angle = w.norm();
+    const Eigen::Matrix3d dR = angle > 0 ? Eigen::AngleAxisd(angle, w / angle).toRotationMatrix()
+                                         : Eigen::Matrix3d::Identity();
+    // Re-orthonormalise so that many small updates never drift off SO(3).
+    const Eigen::Matrix3d next_R =
+        Eigen::Quaterniond(dR * R).normalized().toRotationMatrix();
+    const Eigen::Vector3d next_t = lin.center + dR * (t - lin.center) + v;
+    ++stage.iterations;
+    ++result.iterations;
+    const bool small = angle < rotation_epsilon && v.norm() < translation_epsilon;
+    Linearization next = Linearize(source, target, data, next_R, next_t, options, corr);
+    if (options.step_control && is_finest && next.cost > lin.cost &&
+        next.correspondences >= options.min_correspondences) {
+      // Uphill: stay, damp harder. A step this small that still climbs means the minimum is here.
+      damping = std::max(damping, 1e-6) * 10.0;
+      if (small || damping > 1e4) {
+        stage.converged = true;
+        break;
+      }
+      continue;
+    }
+    R = next_R;
+    t = next_t;
+    lin = std::move(next);
+    stage.correspondences = lin.correspondences;
+    damping = std::max(damping * 0.1, options.damping);
+    stage.last_update_rotation_rad = angle;
+    stage.last_update_translation = v.norm();
+    if (small) {
+      stage.converged = true;
+      break;
+    }
+  }
+  return outcome;
 }
 
 }  // namespace
@@ -464,72 +608,90 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
   Linearization final_lin;
   // Measuring only visits the finest depth (and the fitness depth below).
   for (int depth = options.evaluate_only ? finest : coarsest; depth <= finest; ++depth) {
-    const auto stage_start = std::chrono::steady_clock::now();
-    DepthStage stage;
-    stage.depth = depth;
-    DepthData data = PrepareDepth(source, target, depth, options);
-    stage.cell_edge = data.edge_target;
-    stage.source_nodes = static_cast<int>(data.source_nodes.size());
-    stage.prepare_seconds = SecondsSince(stage_start);
-    // A coarser depth only has to hand the next one an error well inside a cell: looser test.
     const bool is_finest = depth == finest;
-    const double loosen = is_finest ? 1.0 : options.coarse_epsilon_factor;
-    const double rotation_epsilon = loosen * options.rotation_epsilon_rad;
-    const double translation_epsilon =
-        loosen * options.translation_epsilon_cells * data.edge_target;
-    Linearization lin;
-    for (int iteration = 0; iteration <= options.max_iterations_per_depth; ++iteration) {
-      // At the finest depth the pass after the last update only measures: its linearisation at
-      // the final transform feeds the information matrix, fitness and RMSE.
-      if (stage.converged && !is_finest) break;
-      lin = Linearize(source, target, data, R, t, options, corr);
-      stage.correspondences = lin.correspondences;
-      if (iteration == options.max_iterations_per_depth || stage.converged ||
-          options.evaluate_only) {
-        break;
+    const bool rebin = !is_finest && options.rebin_coarse_depths;
+    const int rounds = rebin ? options.max_rebin_rounds : 1;
+    for (int round = 0; round < rounds; ++round) {
+      const auto stage_start = std::chrono::steady_clock::now();
+      DepthStage stage;
+      stage.depth = depth;
+      // A re-binned stage refines the motion of the source as already moved (from the identity)
+      // and composes it onto (R, t) afterwards.
+      std::optional<Octree> rebinned;
+      if (rebin) {
+        // From nodes 8^3 times finer than the cells (or the finest): plenty to place each cell's
+        // CoM and shape, and a 120k-point scan re-bins ~700 depth-6 nodes, not ~12k depth-9 ones.
+        const int from_depth = std::min(finest, depth + kRebinFromDepthsBelow);
+        absl::StatusOr<Octree> cells = RebinOnTargetCells(source, from_depth, depth, R, t, target);
+        if (!cells.ok()) {
+          // Nothing of the source inside the target's cube: no overlap at this pose.
+          result.T_target_source = MakeIsometry(R, t);
+          result.failure_reason = absl::StrCat(
+              "no overlap: the source lies outside the target's cube at depth ", depth,
+              " under the current transform");
+          result.total_seconds = SecondsSince(start);
+          return result;
+        }
+        rebinned = *std::move(cells);
       }
-      if (lin.correspondences < options.min_correspondences) break;
-      Matrix6d H = lin.H;
-      const double mean_diag = H.diagonal().mean();
-      H.diagonal().array() += options.damping * mean_diag;
-      const Vector6d delta = H.ldlt().solve(-lin.b);
-      if (!delta.allFinite() || !(mean_diag > 0)) {
+      const Octree& stage_source = rebin ? *rebinned : source;
+      Eigen::Matrix3d stage_R = rebin ? Eigen::Matrix3d::Identity() : R;
+      Eigen::Vector3d stage_t = rebin ? Eigen::Vector3d::Zero() : t;
+      TreeRefinementOptions stage_options = options;
+      if (rebin) stage_options.covariance_epsilon = options.coarse_covariance_epsilon;
+      DepthData data = PrepareDepth(stage_source, target, depth, stage_options);
+      stage.cell_edge = data.edge_target;
+      stage.source_nodes = static_cast<int>(data.source_nodes.size());
+      stage.prepare_seconds = SecondsSince(stage_start);
+      const StageOutcome outcome = RunStage(stage_source, target, data, is_finest, stage_options, corr,
+                                            stage_R, stage_t, stage, result);
+      if (rebin) {
+        R = stage_R * R;
+        t = stage_R * t + stage_t;
+        R = Eigen::Quaterniond(R).normalized().toRotationMatrix();
+      } else {
+        R = stage_R;
+        t = stage_t;
+      }
+      stage.seconds = SecondsSince(stage_start);
+      if (round == 0) {
+        result.stages.push_back(stage);
+      } else {  // one entry per depth: the rounds add up, the last one's state stands
+        DepthStage& merged = result.stages.back();
+        stage.rounds = merged.rounds + 1;
+        stage.iterations += merged.iterations;
+        stage.seconds += merged.seconds;
+        stage.prepare_seconds += merged.prepare_seconds;
+        merged = stage;
+      }
+      if (outcome.singular) {
         result.T_target_source = MakeIsometry(R, t);
         result.failure_reason =
             absl::StrCat("singular normal equations at depth ", depth, " (no constraint at all)");
-        result.stages.push_back(stage);
         result.total_seconds = SecondsSince(start);
         return result;
       }
-      const Eigen::Vector3d w = delta.head<3>();
-      const Eigen::Vector3d v = delta.tail<3>();
-      const double angle = w.norm();
-      const Eigen::Matrix3d dR = angle > 0 ? Eigen::AngleAxisd(angle, w / angle).toRotationMatrix()
-                                           : Eigen::Matrix3d::Identity();
-      R = dR * R;
-      t = lin.center + dR * (t - lin.center) + v;
-      // Re-orthonormalise so that many small updates never drift off SO(3).
-      R = Eigen::Quaterniond(R).normalized().toRotationMatrix();
-      ++stage.iterations;
-      ++result.iterations;
-      stage.last_update_rotation_rad = angle;
-      stage.last_update_translation = v.norm();
-      if (angle < rotation_epsilon && v.norm() < translation_epsilon) {
-        stage.converged = true;
+      const Linearization& lin = outcome.lin;
+      if (lin.correspondences < options.min_correspondences) {
+        result.T_target_source = MakeIsometry(R, t);
+        result.failure_reason = absl::StrCat(
+            "no overlap: ", lin.correspondences, " correspondence(s) at depth ", depth, " (need ",
+            options.min_correspondences,
+            "); the clouds do not overlap under the current transform");
+        result.total_seconds = SecondsSince(start);
+        return result;
+      }
+      final_lin = lin;
+      // Another round on cells re-binned at the new pose only when this one moved the source by
+      // a sizeable part of a cell (its cells no longer coincide with the target's).
+      const double moved = std::max(Eigen::AngleAxisd(stage_R).angle() * target.half_length(),
+                                    stage_t.norm());
+      const bool last_round = round + 1 == rounds || moved < kRebinAgainCells * data.edge_target;
+      if (last_round) {
+        all_converged = all_converged && stage.converged && !options.evaluate_only;
+        break;
       }
     }
-    stage.seconds = SecondsSince(stage_start);
-    result.stages.push_back(stage);
-    all_converged = all_converged && stage.converged && !options.evaluate_only;
-    if (lin.correspondences < options.min_correspondences) {
-      result.T_target_source = MakeIsometry(R, t);
-      result.failure_reason = absl::StrCat(
-          "no overlap: ", lin.correspondences, " correspondence(s) at depth ", depth, " (need ",
-          options.min_correspondences, "); the clouds do not overlap under the current transform");
-      result.total_seconds = SecondsSince(start);
-      return result;
-    }
-    final_lin = lin;
   }
 
   result.T_target_source = MakeIsometry(R, t);

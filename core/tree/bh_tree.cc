@@ -89,6 +89,7 @@ class BarnesHutTreeBuilder {
  public:
   using Tree = BarnesHutTree<D>;
   using Vector = typename Tree::Vector;
+  using PackedSymmetric = typename Tree::PackedSymmetric;
   using VectorD = Eigen::Matrix<double, D, 1>;
   using PackedD = Eigen::Matrix<double, D*(D + 1) / 2, 1>;
 
@@ -114,6 +115,7 @@ class BarnesHutTreeBuilder {
 
   static absl::StatusOr<Tree> Build(absl::Span<const Vector> points,
                                     absl::Span<const uint32_t> weights,
+                                    absl::Span<const PackedSymmetric> covariances,
                                     const BarnesHutTreeOptions& options) {
     if (options.max_depth < 0 || options.max_depth > kMaxMortonDepth<D>) {
       return absl::InvalidArgumentError(absl::StrCat("tree max_depth ", options.max_depth,
@@ -133,6 +135,16 @@ class BarnesHutTreeBuilder {
     if (!weights.empty() && weights.size() != points.size()) {
       return absl::InvalidArgumentError(absl::StrCat("tree build got ", weights.size(),
                                                      " weights for ", points.size(), " points"));
+    }
+    if (!covariances.empty() && covariances.size() != points.size()) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "tree build got ", covariances.size(), " covariances for ", points.size(), " points"));
+    }
+    for (size_t i = 0; i < covariances.size(); ++i) {
+      if (!covariances[i].allFinite()) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("covariance ", i, " has a non-finite entry"));
+      }
     }
     uint64_t total_weight = weights.empty() ? points.size() : 0;
     for (uint32_t w : weights) total_weight += w;
@@ -217,6 +229,10 @@ class BarnesHutTreeBuilder {
         for (int a = 0; a < D; ++a) sum[a] += w * p[a];
         for (int r = 0, k = 0; r < D; ++r) {
           for (int c = r; c < D; ++c, ++k) sum_sq[k] += w * p[r] * p[c];
+        }
+        if (!covariances.empty()) {  // the patch's own spread about its centre
+          const PackedSymmetric& spread = covariances[order[i]];
+          for (int k = 0; k < kPacked; ++k) sum_sq[k] += w * static_cast<double>(spread[k]);
         }
         ++i;
       } while (i < n && codes[i] == code);
@@ -334,14 +350,22 @@ class BarnesHutTreeBuilder {
 template <int D>
 absl::StatusOr<BarnesHutTree<D>> BuildBarnesHutTree(
     absl::Span<const Eigen::Matrix<float, D, 1>> points, const BarnesHutTreeOptions& options) {
-  return BarnesHutTreeBuilder<D>::Build(points, {}, options);
+  return BarnesHutTreeBuilder<D>::Build(points, {}, {}, options);
 }
 
 template <int D>
 absl::StatusOr<BarnesHutTree<D>> BuildWeightedBarnesHutTree(
     absl::Span<const Eigen::Matrix<float, D, 1>> points, absl::Span<const uint32_t> weights,
     const BarnesHutTreeOptions& options) {
-  return BarnesHutTreeBuilder<D>::Build(points, weights, options);
+  return BarnesHutTreeBuilder<D>::Build(points, weights, {}, options);
+}
+
+template <int D>
+absl::StatusOr<BarnesHutTree<D>> BuildWeightedBarnesHutTree(
+    absl::Span<const Eigen::Matrix<float, D, 1>> points, absl::Span<const uint32_t> weights,
+    absl::Span<const typename BarnesHutTree<D>::PackedSymmetric> covariances,
+    const BarnesHutTreeOptions& options) {
+  return BarnesHutTreeBuilder<D>::Build(points, weights, covariances, options);
 }
 
 absl::StatusOr<Octree> BuildOctree(const PointCloud& cloud, const BarnesHutTreeOptions& options) {
@@ -427,5 +451,11 @@ template absl::StatusOr<BarnesHutTree<2>> BuildWeightedBarnesHutTree<2>(
 template absl::StatusOr<BarnesHutTree<3>> BuildWeightedBarnesHutTree<3>(
     absl::Span<const Eigen::Matrix<float, 3, 1>>, absl::Span<const uint32_t>,
     const BarnesHutTreeOptions&);
+template absl::StatusOr<BarnesHutTree<2>> BuildWeightedBarnesHutTree<2>(
+    absl::Span<const Eigen::Matrix<float, 2, 1>>, absl::Span<const uint32_t>,
+    absl::Span<const BarnesHutTree<2>::PackedSymmetric>, const BarnesHutTreeOptions&);
+template absl::StatusOr<BarnesHutTree<3>> BuildWeightedBarnesHutTree<3>(
+    absl::Span<const Eigen::Matrix<float, 3, 1>>, absl::Span<const uint32_t>,
+    absl::Span<const BarnesHutTree<3>::PackedSymmetric>, const BarnesHutTreeOptions&);
 
 }  // namespace rpsr::core

@@ -169,6 +169,17 @@ absl::StatusOr<BarnesHutTree<D>> BuildWeightedBarnesHutTree(
     absl::Span<const Eigen::Matrix<float, D, 1>> points, absl::Span<const uint32_t> weights,
     const BarnesHutTreeOptions& options = {});
 
+// The same for weighted points that each stand for a patch of points: `covariances` (one per
+// point: the patch's population covariance, packed like the nodes') add each patch's own spread
+// to the moments, so that re-binning another tree's nodes into new cells keeps the cells' shapes
+// as a build from the raw points would give them (core/refine re-bins a source on a target's
+// cells). InvalidArgument when the sizes differ or an entry is not finite.
+template <int D>
+absl::StatusOr<BarnesHutTree<D>> BuildWeightedBarnesHutTree(
+    absl::Span<const Eigen::Matrix<float, D, 1>> points, absl::Span<const uint32_t> weights,
+    absl::Span<const typename BarnesHutTree<D>::PackedSymmetric> covariances,
+    const BarnesHutTreeOptions& options = {});
+
 // Convenience for 3D clouds.
 absl::StatusOr<Octree> BuildOctree(const PointCloud& cloud,
                                    const BarnesHutTreeOptions& options = {});

@@ -175,8 +175,13 @@ TEST_F(RpsrClientTest, CloudsInOneCallInlineAndAsyncAgree) {
   for (auto& future : futures) {
     absl::StatusOr<RegistrationResult> result = future.get();
     ASSERT_TRUE(result.ok()) << result.status();
-    // Batched or not, the same pose (within the network's batching tolerance).
-    EXPECT_TRUE(result->T_target_source.isApprox(uploaded->T_target_source, 1e-4));
+    // Batched or not, the same pose: the network's outputs differ by float rounding between batch
+    // sizes (~1e-6), and the refinement's re-binned coarse stages can carry that into different
+    // cells, so the refined poses agree within the registrar's batching tolerance, not bit for
+    // bit (core/registrar/registrar.h, RegisterBatch).
+    const core::PairError apart = core::ErrorOf(result->T_target_source, uploaded->T_target_source);
+    EXPECT_LT(apart.rotation_deg, 0.05);
+    EXPECT_LT(apart.translation, 1e-3);
   }
   absl::StatusOr<UploadedCloud> source = (*session)->UploadAsync(object_->source.points).get();
   ASSERT_TRUE(source.ok()) << source.status();

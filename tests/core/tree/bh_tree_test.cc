@@ -374,6 +374,50 @@ TEST(BarnesHutTreeTest, WeightedBuildEqualsDuplicatedPoints) {
   EXPECT_FALSE(BuildWeightedBarnesHutTree<3>(absl::MakeConstSpan(points), weights).ok());
 }
 
+// Re-binning a tree's nodes with their covariances (what the refinement does to put a source on a
+// target's cells) gives the coarser levels a build from the raw points gives: counts, CoMs and
+// covariances; without the covariances the cells would lose their nodes' own spread.
+TEST(BarnesHutTreeTest, WeightedBuildWithNodeCovariancesEqualsTheRawPointsBuild) {
+  const Points<3> points = MakeCloud<3>(CloudKind::kClusters, 3000, 21);
+  BarnesHutTreeOptions options;
+  options.max_depth = 6;
+  auto raw = BuildBarnesHutTree<3>(absl::MakeConstSpan(points), options);
+  ASSERT_TRUE(raw.ok()) << raw.status();
+  const Octree::Level& fine = raw->level(6);
+  BarnesHutTreeOptions coarse = options;
+  coarse.max_depth = 3;
+  coarse.cube_center = {raw->center()[0], raw->center()[1], raw->center()[2]};
+  coarse.cube_half_length = raw->half_length();
+  auto with_spread = BuildWeightedBarnesHutTree<3>(
+      absl::MakeConstSpan(fine.center_of_mass), fine.count, absl::MakeConstSpan(fine.covariance),
+      coarse);
+  auto without_spread =
+      BuildWeightedBarnesHutTree<3>(absl::MakeConstSpan(fine.center_of_mass), fine.count, coarse);
+  ASSERT_TRUE(with_spread.ok() && without_spread.ok());
+  float missing_spread = 0.0f;
+  for (int depth = 0; depth <= 3; ++depth) {
+    ASSERT_EQ(with_spread->level(depth).morton, raw->level(depth).morton);
+    ASSERT_EQ(with_spread->level(depth).count, raw->level(depth).count);
+    for (size_t i = 0; i < raw->level(depth).size(); ++i) {
+      EXPECT_LT(
+          (with_spread->level(depth).center_of_mass[i] - raw->level(depth).center_of_mass[i])
+              .norm(),
+          1e-4f);
+      EXPECT_LT((with_spread->Covariance(depth, i) - raw->Covariance(depth, i)).norm(), 1e-4f);
+      missing_spread = std::max(
+          missing_spread, (without_spread->Covariance(depth, i) - raw->Covariance(depth, i)).norm());
+    }
+  }
+  EXPECT_GT(missing_spread, 1e-3f);  // the test would notice the spread being dropped
+  std::vector<Octree::PackedSymmetric> short_list(fine.covariance.begin(),
+                                                  fine.covariance.end() - 1);
+  EXPECT_THAT(BuildWeightedBarnesHutTree<3>(absl::MakeConstSpan(fine.center_of_mass), fine.count,
+                                            absl::MakeConstSpan(short_list), coarse)
+                  .status()
+                  .message(),
+              HasSubstr("covariances"));
+}
+
 TEST(BarnesHutTreeTest, GivenCubeIsUsedAndOutsidePointsClampToBorderCells) {
   PointCloud cloud;
   cloud.points = {{0.25f, 0.25f, 0.25f}, {-0.5f, -0.5f, -0.5f}, {3.0f, 0.0f, 0.0f}};
