@@ -203,6 +203,8 @@ class ServerState {
   }
 
   void Shutdown(absl::Duration grace) {
+    // Only a server that has said SERVING has load balancers to warn with the drain notice.
+    const bool was_serving = ready();
     {
       absl::MutexLock lock(&mu_);
       if (shutting_down_) return;
@@ -214,7 +216,9 @@ class ServerState {
     if (service_ != nullptr) service_->StartDraining();
     if (server_ != nullptr) {
       SetServing(false);
-      if (options_.drain_notice > absl::ZeroDuration()) absl::SleepFor(options_.drain_notice);
+      if (was_serving && options_.drain_notice > absl::ZeroDuration()) {
+        absl::SleepFor(options_.drain_notice);
+      }
       // Waits for calls in flight (their registrations still run on the batcher) up to the grace,
       // then cancels the rest.
       server_->Shutdown(absl::ToChronoTime(absl::Now() + grace));

@@ -82,7 +82,8 @@ struct ServerOptions {
 
   // On Shutdown: how long health says NOT_SERVING and new calls are answered UNAVAILABLE before
   // gRPC stops accepting connections, so that load balancers watching health move traffic away
-  // first (calls in flight go on throughout). 0: stop accepting at once.
+  // first (calls in flight go on throughout). 0: stop accepting at once. Skipped by a server that
+  // never said SERVING (its model never loaded): no balancer sends it traffic.
   absl::Duration drain_notice = absl::ZeroDuration();
 
   bool enable_reflection = true;

@@ -819,6 +819,8 @@ TEST(ServerLifecycleTest, NotServingUntilTheModelLoadsAndAFailedLoadSaysWhy) {
   options.registrar = nullptr;
   options.registrar_config.model_path = "/nonexistent/model.rpsrw";
   options.wait_for_model = false;
+  // A server that never served has nobody to warn: it does not wait out the drain notice.
+  options.drain_notice = absl::Seconds(30);
   auto server = Start(options);
   ASSERT_NE(server, nullptr);
   ServiceTestClient client(server->target());
@@ -828,7 +830,9 @@ TEST(ServerLifecycleTest, NotServingUntilTheModelLoadsAndAFailedLoadSaysWhy) {
   v1::RegisterRequest request;
   v1::RegisterResponse response;
   EXPECT_CODE(client.Register(request, &response), UNAVAILABLE, "loading its model");
+  const absl::Time shutdown_start = absl::Now();
   server->Shutdown(absl::Seconds(5));
+  EXPECT_LT(absl::Now() - shutdown_start, absl::Seconds(15));
 }
 
 TEST(ServerLifecycleTest, ShutdownFinishesWorkInFlightAndRefusesNewCalls) {
