@@ -292,9 +292,8 @@ Linearization Linearize(const Octree& source, const Octree& target, DepthData& d
       options.robust_scale_cells * options.robust_scale_cells / (2.0 * options.covariance_epsilon);
   const double mean_target_density = 1.0 / static_cast<double>(std::max<size_t>(t_level.size(), 1));
   for (double prior : data.source_prior) {
-    const double unmatched = options.weights == WeightScheme::kInverseDensity
-                                 ? prior * mean_target_density
-                                 : prior;
+    const double unmatched =
+        options.weights == WeightScheme::kInverseDensity ? prior * mean_target_density : prior;
     lin.cost += unmatched * c2;  // matched nodes replace their share below
   }
   if (corr.empty() || !(prior_sum > 0.0)) return lin;
@@ -418,7 +417,8 @@ absl::Status ValidateInputs(const Octree& source, const Octree& target,
       !(o.coarse_epsilon_factor >= 1) || !(o.degeneracy_threshold >= 0) || !(o.min_fitness >= 0)) {
     return absl::InvalidArgumentError(
         "RefineOnTrees: epsilons, distances and scales must be positive (covariance_epsilon and "
-        "coarse_covariance_epsilon in (0, 1]); damping, degeneracy_threshold and min_fitness non-negative");
+        "coarse_covariance_epsilon in (0, 1]); damping, degeneracy_threshold and min_fitness "
+        "non-negative");
   }
   return absl::OkStatus();
 }
@@ -466,10 +466,10 @@ absl::StatusOr<Octree> RebinOnTargetCells(const Octree& source, int from_depth, 
     // The node's own spread, turned into the target frame (the cell's shape is what the
     // refinement's plane-to-plane residuals read; CoMs alone would leave a cell of a few
     // children without a reliable normal).
-    const Eigen::Matrix3d C = R * source.Covariance(from_depth, static_cast<int>(i))
-                                      .cast<double>() * R.transpose();
-    spreads.push_back(Octree::PackedSymmetric(C(0, 0), C(0, 1), C(0, 2), C(1, 1), C(1, 2),
-                                              C(2, 2)));
+    const Eigen::Matrix3d C =
+        R * source.Covariance(from_depth, static_cast<int>(i)).cast<double>() * R.transpose();
+    spreads.push_back(
+        Octree::PackedSymmetric(C(0, 0), C(0, 1), C(0, 2), C(1, 1), C(1, 2), C(2, 2)));
   }
   if (moved.empty()) {
     return absl::InvalidArgumentError("no source node inside the target's cube");
@@ -529,8 +529,7 @@ StageOutcome RunStage(const Octree& source, const Octree& target, DepthData& dat
     const Eigen::Matrix3d dR = angle > 0 ? Eigen::AngleAxisd(angle, w / angle).toRotationMatrix()
                                          : Eigen::Matrix3d::Identity();
     // Re-orthonormalise so that many small updates never drift off SO(3).
-    const Eigen::Matrix3d next_R =
-        Eigen::Quaterniond(dR * R).normalized().toRotationMatrix();
+    const Eigen::Matrix3d next_R = Eigen::Quaterniond(dR * R).normalized().toRotationMatrix();
     const Eigen::Vector3d next_t = lin.center + dR * (t - lin.center) + v;
     ++stage.iterations;
     ++result.iterations;
@@ -626,9 +625,9 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
         if (!cells.ok()) {
           // Nothing of the source inside the target's cube: no overlap at this pose.
           result.T_target_source = MakeIsometry(R, t);
-          result.failure_reason = absl::StrCat(
-              "no overlap: the source lies outside the target's cube at depth ", depth,
-              " under the current transform");
+          result.failure_reason =
+              absl::StrCat("no overlap: the source lies outside the target's cube at depth ", depth,
+                           " under the current transform");
           result.total_seconds = SecondsSince(start);
           return result;
         }
@@ -643,8 +642,8 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
       stage.cell_edge = data.edge_target;
       stage.source_nodes = static_cast<int>(data.source_nodes.size());
       stage.prepare_seconds = SecondsSince(stage_start);
-      const StageOutcome outcome = RunStage(stage_source, target, data, is_finest, stage_options, corr,
-                                            stage_R, stage_t, stage, result);
+      const StageOutcome outcome = RunStage(stage_source, target, data, is_finest, stage_options,
+                                            corr, stage_R, stage_t, stage, result);
       if (rebin) {
         R = stage_R * R;
         t = stage_R * t + stage_t;
@@ -674,18 +673,18 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
       const Linearization& lin = outcome.lin;
       if (lin.correspondences < options.min_correspondences) {
         result.T_target_source = MakeIsometry(R, t);
-        result.failure_reason = absl::StrCat(
-            "no overlap: ", lin.correspondences, " correspondence(s) at depth ", depth, " (need ",
-            options.min_correspondences,
-            "); the clouds do not overlap under the current transform");
+        result.failure_reason =
+            absl::StrCat("no overlap: ", lin.correspondences, " correspondence(s) at depth ", depth,
+                         " (need ", options.min_correspondences,
+                         "); the clouds do not overlap under the current transform");
         result.total_seconds = SecondsSince(start);
         return result;
       }
       final_lin = lin;
       // Another round on cells re-binned at the new pose only when this one moved the source by
       // a sizeable part of a cell (its cells no longer coincide with the target's).
-      const double moved = std::max(Eigen::AngleAxisd(stage_R).angle() * target.half_length(),
-                                    stage_t.norm());
+      const double moved =
+          std::max(Eigen::AngleAxisd(stage_R).angle() * target.half_length(), stage_t.norm());
       const bool last_round = round + 1 == rounds || moved < kRebinAgainCells * data.edge_target;
       if (last_round) {
         all_converged = all_converged && stage.converged && !options.evaluate_only;

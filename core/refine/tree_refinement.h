@@ -167,7 +167,7 @@ struct DepthStage {
   double cell_edge = 0.0;   // metres (target tree)
   int source_nodes = 0;     // used at this depth
   int correspondences = 0;  // at the last iteration
-  int iterations = 0;  // over all rounds
+  int iterations = 0;       // over all rounds
   // Re-binned depths (TreeRefinementOptions::rebin_coarse_depths): how many times the source was
   // re-binned and the depth run; the other fields are the last round's (times and iterations add
   // up).

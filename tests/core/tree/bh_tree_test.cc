@@ -388,9 +388,9 @@ TEST(BarnesHutTreeTest, WeightedBuildWithNodeCovariancesEqualsTheRawPointsBuild)
   coarse.max_depth = 3;
   coarse.cube_center = {raw->center()[0], raw->center()[1], raw->center()[2]};
   coarse.cube_half_length = raw->half_length();
-  auto with_spread = BuildWeightedBarnesHutTree<3>(
-      absl::MakeConstSpan(fine.center_of_mass), fine.count, absl::MakeConstSpan(fine.covariance),
-      coarse);
+  auto with_spread =
+      BuildWeightedBarnesHutTree<3>(absl::MakeConstSpan(fine.center_of_mass), fine.count,
+                                    absl::MakeConstSpan(fine.covariance), coarse);
   auto without_spread =
       BuildWeightedBarnesHutTree<3>(absl::MakeConstSpan(fine.center_of_mass), fine.count, coarse);
   ASSERT_TRUE(with_spread.ok() && without_spread.ok());
@@ -399,13 +399,13 @@ TEST(BarnesHutTreeTest, WeightedBuildWithNodeCovariancesEqualsTheRawPointsBuild)
     ASSERT_EQ(with_spread->level(depth).morton, raw->level(depth).morton);
     ASSERT_EQ(with_spread->level(depth).count, raw->level(depth).count);
     for (size_t i = 0; i < raw->level(depth).size(); ++i) {
-      EXPECT_LT(
-          (with_spread->level(depth).center_of_mass[i] - raw->level(depth).center_of_mass[i])
-              .norm(),
-          1e-4f);
+      EXPECT_LT((with_spread->level(depth).center_of_mass[i] - raw->level(depth).center_of_mass[i])
+                    .norm(),
+                1e-4f);
       EXPECT_LT((with_spread->Covariance(depth, i) - raw->Covariance(depth, i)).norm(), 1e-4f);
-      missing_spread = std::max(
-          missing_spread, (without_spread->Covariance(depth, i) - raw->Covariance(depth, i)).norm());
+      missing_spread =
+          std::max(missing_spread,
+                   (without_spread->Covariance(depth, i) - raw->Covariance(depth, i)).norm());
     }
   }
   EXPECT_GT(missing_spread, 1e-3f);  // the test would notice the spread being dropped
