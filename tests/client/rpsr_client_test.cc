@@ -269,6 +269,35 @@ TEST(RpsrClientRecoveryTest, EvictedCloudsAreUploadedAgain) {
   }
 }
 
+// An expired session answers NOT_FOUND; the library opens a new one (same options), uploads the
+// kept points again and registers, so the caller's cloud ids keep working.
+TEST(RpsrClientRecoveryTest, ExpiredSessionsAreReCreated) {
+  const SamplePair object = LoadSample("object");
+  absl::StatusOr<std::unique_ptr<server::RunningServer>> running =
+      server::StartServer(TestServerOptions());
+  ASSERT_TRUE(running.ok()) << running.status();
+  absl::StatusOr<std::unique_ptr<Client>> client = Client::Connect(At((*running)->target()));
+  ASSERT_TRUE(client.ok());
+  SessionOptions session_options = TreeDepth(6);
+  session_options.ttl = absl::Milliseconds(300);
+  absl::StatusOr<std::unique_ptr<Session>> session = (*client)->CreateSession(session_options);
+  ASSERT_TRUE(session.ok()) << session.status();
+  const std::string first_id = (*session)->id();
+  absl::StatusOr<UploadedCloud> source = (*session)->Upload(object.source.points);
+  absl::StatusOr<UploadedCloud> target = (*session)->Upload(object.target.points);
+  ASSERT_TRUE(source.ok() && target.ok());
+  std::this_thread::sleep_for(std::chrono::milliseconds(1200));  // idle past the time to live
+  absl::StatusOr<RegistrationResult> result =
+      (*session)->Register(source->cloud_id, target->cloud_id);
+  ASSERT_TRUE(result.ok()) << result.status();
+  EXPECT_LT(core::ErrorOf(result->T_target_source, object.truth).rotation_deg, 2.0);
+  EXPECT_NE((*session)->id(), first_id);
+  // A new upload lands in the new session and registers against the re-uploaded target.
+  absl::StatusOr<UploadedCloud> again = (*session)->Upload(object.source.points);
+  ASSERT_TRUE(again.ok()) << again.status();
+  EXPECT_TRUE((*session)->Register(again->cloud_id, target->cloud_id).ok());
+}
+
 TEST(RpsrClientRecoveryTest, RetriesWhileTheServerIsAway) {
   const int port = FreePort();
   ClientOptions client_options;
