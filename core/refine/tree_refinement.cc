@@ -535,9 +535,10 @@ StageOutcome RunStage(const Octree& source, const Octree& target, DepthData& dat
     ++result.iterations;
     const bool small = angle < rotation_epsilon && v.norm() < translation_epsilon;
     Linearization next = Linearize(source, target, data, next_R, next_t, options, corr);
-    if (options.step_control && is_finest && next.cost > lin.cost &&
-        next.correspondences >= options.min_correspondences) {
-      // Uphill: stay, damp harder. A step this small that still climbs means the minimum is here.
+    if (options.step_control && is_finest &&
+        (next.cost > lin.cost || next.correspondences < options.min_correspondences)) {
+      // Uphill (or losing the overlap): stay, damp harder. A step this small that still climbs
+      // means the minimum is here.
       damping = std::max(damping, 1e-6) * 10.0;
       if (small || damping > 1e4) {
         stage.converged = true;
