@@ -291,10 +291,12 @@ Linearization Linearize(const Octree& source, const Octree& target, DepthData& d
   const double c2 =
       options.robust_scale_cells * options.robust_scale_cells / (2.0 * options.covariance_epsilon);
   const double mean_target_density = 1.0 / static_cast<double>(std::max<size_t>(t_level.size(), 1));
+  // A source node's cost weight when unmatched: its prior times the target's mean density factor.
+  auto unmatched_weight = [&](double prior) {
+    return options.weights == WeightScheme::kInverseDensity ? prior * mean_target_density : prior;
+  };
   for (double prior : data.source_prior) {
-    const double unmatched =
-        options.weights == WeightScheme::kInverseDensity ? prior * mean_target_density : prior;
-    lin.cost += unmatched * c2;  // matched nodes replace their share below
+    lin.cost += unmatched_weight(prior) * c2;  // matched nodes replace their share below
   }
   if (corr.empty() || !(prior_sum > 0.0)) return lin;
 
@@ -315,10 +317,7 @@ Linearization Linearize(const Octree& source, const Octree& target, DepthData& d
     const Eigen::Vector3d r = c.target_mean - c.moved;
     const double e2 = r.dot(c.information * r);
     const double g = c2 / (c2 + e2);
-    const double unmatched = options.weights == WeightScheme::kInverseDensity
-                                 ? data.source_prior[c.k] * mean_target_density
-                                 : data.source_prior[c.k];
-    lin.cost += c.weight * c2 * e2 / (c2 + e2) - unmatched * c2;
+    lin.cost += c.weight * c2 * e2 / (c2 + e2) - unmatched_weight(data.source_prior[c.k]) * c2;
     c.robust = g * g;
     lin.robust_sum += c.robust;
     c.weight *= prior_scale * c.robust;
@@ -620,7 +619,8 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
       std::optional<Octree> rebinned;
       if (rebin) {
         // From nodes 8^3 times finer than the cells (or the finest): plenty to place each cell's
-        // CoM and shape, and a 120k-point scan re-bins ~700 depth-6 nodes, not ~12k depth-9 ones.
+        // CoM and shape, and a 120k-point scan's depth 3 re-bins ~700 depth-6 nodes, not ~12k
+        // depth-9 ones (its depths 6-8 still read depth 9).
         const int from_depth = std::min(finest, depth + kRebinFromDepthsBelow);
         absl::StatusOr<Octree> cells = RebinOnTargetCells(source, from_depth, depth, R, t, target);
         if (!cells.ok()) {
