@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
 #include <utility>
@@ -34,20 +35,17 @@ Eigen::Isometry3d MakeIsometry(const Eigen::Matrix3d& R, const Eigen::Vector3d& 
   return T;
 }
 
-Eigen::Matrix3d Skew(const Eigen::Vector3d& a) {
-  Eigen::Matrix3d m;
-  m << 0.0, -a.z(), a.y(), a.z(), 0.0, -a.x(), -a.y(), a.x(), 0.0;
-  return m;
-}
-
 // A node's covariance regularised as in GICP, in metres^2: eigenvalues (eps, 1, 1) * edge^2
 // along the eigenvectors of the node's shape (the smallest is the surface normal). A node with
 // too few points to have a shape borrows it from its nearest ancestor that has enough (the
 // parent's patch of the same surface): deep levels of sparse clouds are mostly such nodes, and
 // making them isotropic would hand every plane information along itself (a plane would look
 // constrained in-plane). Only when even the root lacks points is it isotropic, edge^2 * I.
+// Kept as iso * I - flat * n n^T (flat = edge^2 (1 - eps) when planar, 0 when isotropic): turning
+// it by R then costs one rotated normal instead of two 3x3 products, in the correspondence loop.
 struct RegularizedNode {
-  Eigen::Matrix3d covariance;
+  double iso = 0.0;
+  double flat = 0.0;
   Eigen::Vector3d normal = Eigen::Vector3d::Zero();
   bool planar = false;
 };
@@ -56,6 +54,7 @@ RegularizedNode Regularize(const Octree& tree, int depth, int node, double edge,
                            const TreeRefinementOptions& options) {
   RegularizedNode out;
   const double edge2 = edge * edge;
+  out.iso = edge2;
   int shape_depth = depth;
   int shape_node = node;
   while (static_cast<int>(tree.level(shape_depth).count[shape_node]) <
@@ -66,35 +65,53 @@ RegularizedNode Regularize(const Octree& tree, int depth, int node, double edge,
   }
   if (static_cast<int>(tree.level(shape_depth).count[shape_node]) <
       options.min_count_for_covariance) {
-    out.covariance = edge2 * Eigen::Matrix3d::Identity();
     return out;
   }
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
   solver.computeDirect(tree.Covariance(shape_depth, shape_node).cast<double>());
-  const Eigen::Matrix3d& v = solver.eigenvectors();  // columns, eigenvalues ascending
-  const Eigen::Vector3d values(options.covariance_epsilon, 1.0, 1.0);
-  out.covariance = edge2 * v * values.asDiagonal() * v.transpose();
-  out.normal = v.col(0);
+  out.normal = solver.eigenvectors().col(0);  // eigenvalues ascending
+  out.flat = edge2 * (1.0 - options.covariance_epsilon);
   out.planar = true;
   return out;
 }
 
-// What one depth needs, prepared once per call: the chosen source nodes with their regularised
-// covariances and prior weights, and a hash from the target's Morton codes to node indices (the
-// target does not move, so the lookup is built once per depth).
+// The target's side of one depth: a hash from its Morton codes to node indices and its nodes
+// regularised lazily (only those ever matched pay the eigen-decomposition). It depends on the
+// target tree, the depth and the regularisation options alone, so the rounds of a re-binned depth
+// and the registrar's several starts on one pair share it (TreeRefinementCache).
+struct TargetDepth {
+  int depth = 0;
+  double covariance_epsilon = 0.0;
+  int min_count = 0;
+  double edge = 0.0;
+  absl::flat_hash_map<uint64_t, int32_t> index;
+  std::vector<RegularizedNode> regularized;
+  std::vector<uint8_t> ready;
+};
+
+// The source's side of one depth: the chosen nodes with their regularised covariances and prior
+// weights. On the source's own cells it is shared like the target's; re-binned cells are new at
+// every round.
+struct SourceDepth {
+  int depth = 0;
+  double covariance_epsilon = 0.0;
+  int min_count = 0;
+  WeightScheme weights = WeightScheme::kInverseDensity;
+  int max_nodes = 0;
+  std::vector<int32_t> nodes;
+  std::vector<Eigen::Vector3d> mean;
+  std::vector<RegularizedNode> regularized;
+  std::vector<double> prior;  // inverse density, count or 1 (see WeightScheme)
+};
+
+// One stage's view: both sides, and per source entry the target nodes of the cell block last
+// searched (block_size slots, -1 = empty cell), keyed by the block's home cell code and, for
+// 8-cell blocks, its side bits.
 struct DepthData {
   int depth = 0;
   double edge_target = 0.0;
-  std::vector<int32_t> source_nodes;
-  std::vector<Eigen::Vector3d> source_mean;
-  std::vector<Eigen::Matrix3d> source_covariance;
-  std::vector<double> source_prior;  // inverse density, count or 1 (see WeightScheme)
-  absl::flat_hash_map<uint64_t, int32_t> target_index;
-  // Lazily regularised target nodes (only those ever matched pay the eigen-decomposition).
-  std::vector<RegularizedNode> target_regularized;
-  std::vector<uint8_t> target_ready;
-  // Per source entry: the target nodes of the cell block last searched (block_size slots, -1 =
-  // empty cell), keyed by the block's home cell code and, for 8-cell blocks, its side bits.
+  const SourceDepth* source = nullptr;
+  TargetDepth* target = nullptr;
   int block_size = 8;
   std::vector<uint64_t> block_home;
   std::vector<uint8_t> block_sides;
@@ -105,52 +122,126 @@ double EdgeOf(const Octree& tree, int depth) {
   return 2.0 * tree.half_length() / static_cast<double>(uint64_t{1} << depth);
 }
 
-DepthData PrepareDepth(const Octree& source, const Octree& target, int depth,
-                       const TreeRefinementOptions& options) {
-  DepthData data;
-  data.depth = depth;
-  data.edge_target = EdgeOf(target, depth);
+void PrepareSourceDepth(const Octree& source, int depth, const TreeRefinementOptions& options,
+                        SourceDepth& side) {
+  side.depth = depth;
+  side.covariance_epsilon = options.covariance_epsilon;
+  side.min_count = options.min_count_for_covariance;
+  side.weights = options.weights;
+  side.max_nodes = options.max_source_nodes_per_depth;
   const double edge_source = EdgeOf(source, depth);
   const Octree::Level& s = source.level(depth);
   const size_t n = s.size();
   const size_t used = std::min(n, static_cast<size_t>(options.max_source_nodes_per_depth));
-  data.source_nodes.reserve(used);
+  side.nodes.clear();
+  side.mean.clear();
+  side.regularized.clear();
+  side.prior.clear();
+  side.nodes.reserve(used);
   for (size_t k = 0; k < used; ++k) {
     // Even stride over the Morton order: spatially spread, deterministic.
-    data.source_nodes.push_back(static_cast<int32_t>(k * n / used));
+    side.nodes.push_back(static_cast<int32_t>(k * n / used));
   }
-  data.source_mean.reserve(used);
-  data.source_covariance.reserve(used);
-  data.source_prior.reserve(used);
-  for (int32_t node : data.source_nodes) {
-    data.source_mean.push_back(s.center_of_mass[node].cast<double>());
-    data.source_covariance.push_back(
-        Regularize(source, depth, node, edge_source, options).covariance);
+  side.mean.reserve(used);
+  side.regularized.reserve(used);
+  side.prior.reserve(used);
+  for (int32_t node : side.nodes) {
+    side.mean.push_back(s.center_of_mass[node].cast<double>());
+    side.regularized.push_back(Regularize(source, depth, node, edge_source, options));
     switch (options.weights) {
       case WeightScheme::kInverseDensity:
-        data.source_prior.push_back(s.inverse_density[node]);
+        side.prior.push_back(s.inverse_density[node]);
         break;
       case WeightScheme::kSourceCount:
-        data.source_prior.push_back(s.count[node]);
+        side.prior.push_back(s.count[node]);
         break;
       case WeightScheme::kUniform:
-        data.source_prior.push_back(1.0);
+        side.prior.push_back(1.0);
         break;
     }
   }
+}
+
+void PrepareTargetDepth(const Octree& target, int depth, const TreeRefinementOptions& options,
+                        TargetDepth& side) {
+  side.depth = depth;
+  side.covariance_epsilon = options.covariance_epsilon;
+  side.min_count = options.min_count_for_covariance;
+  side.edge = EdgeOf(target, depth);
   const Octree::Level& t = target.level(depth);
-  data.target_index.reserve(t.size());
+  side.index.clear();
+  side.index.reserve(t.size());
   for (size_t j = 0; j < t.size(); ++j) {
-    data.target_index.emplace(t.morton[j], static_cast<int32_t>(j));
+    side.index.emplace(t.morton[j], static_cast<int32_t>(j));
   }
+  side.regularized.assign(t.size(), RegularizedNode{});
+  side.ready.assign(t.size(), 0);
+}
+
+DepthData MakeDepthData(const SourceDepth& source, TargetDepth& target,
+                        const TreeRefinementOptions& options) {
+  DepthData data;
+  data.depth = target.depth;
+  data.edge_target = target.edge;
+  data.source = &source;
+  data.target = &target;
+  const size_t used = source.nodes.size();
   data.block_size = options.search_27_neighbors ? 27 : 8;
   data.block_home.assign(used, ~uint64_t{0});  // no code: depth <= 21 uses 63 bits
   data.block_sides.assign(used, 0);
   data.block_nodes.assign(used * data.block_size, -1);
-  data.target_regularized.resize(t.size());
-  data.target_ready.assign(t.size(), 0);
   return data;
 }
+
+}  // namespace
+
+// The sides already prepared for one (source, target) pair, found by what they depend on.
+struct TreeRefinementCache::Impl {
+  const Octree* source = nullptr;
+  const Octree* target = nullptr;
+  std::vector<std::unique_ptr<SourceDepth>> sources;
+  std::vector<std::unique_ptr<TargetDepth>> targets;
+
+  void BindTo(const Octree& s, const Octree& t) {
+    if (source == &s && target == &t) return;
+    source = &s;
+    target = &t;
+    sources.clear();
+    targets.clear();
+  }
+
+  const SourceDepth& Source(int depth, const TreeRefinementOptions& o) {
+    for (const auto& side : sources) {
+      if (side->depth == depth && side->covariance_epsilon == o.covariance_epsilon &&
+          side->min_count == o.min_count_for_covariance && side->weights == o.weights &&
+          side->max_nodes == o.max_source_nodes_per_depth) {
+        return *side;
+      }
+    }
+    sources.push_back(std::make_unique<SourceDepth>());
+    PrepareSourceDepth(*source, depth, o, *sources.back());
+    return *sources.back();
+  }
+
+  TargetDepth& Target(int depth, const TreeRefinementOptions& o) {
+    for (const auto& side : targets) {
+      if (side->depth == depth && side->covariance_epsilon == o.covariance_epsilon &&
+          side->min_count == o.min_count_for_covariance) {
+        return *side;
+      }
+    }
+    targets.push_back(std::make_unique<TargetDepth>());
+    PrepareTargetDepth(*target, depth, o, *targets.back());
+    return *targets.back();
+  }
+};
+
+TreeRefinementCache::TreeRefinementCache() : impl_(std::make_unique<Impl>()) {}
+TreeRefinementCache::~TreeRefinementCache() = default;
+TreeRefinementCache::TreeRefinementCache(TreeRefinementCache&&) noexcept = default;
+TreeRefinementCache& TreeRefinementCache::operator=(TreeRefinementCache&&) noexcept = default;
+
+namespace {
 
 struct Correspondence {
   int32_t k = 0;                                    // index into DepthData::source_*
@@ -195,9 +286,9 @@ int32_t FindPartner(const Octree& target, DepthData& data, size_t k, const Eigen
     const int64_t max_cell = static_cast<int64_t>(cells) - 1;
     auto lookup = [&](int64_t x, int64_t y, int64_t z) -> int32_t {
       if (x < 0 || y < 0 || z < 0 || x > max_cell || y > max_cell || z > max_cell) return -1;
-      const auto it = data.target_index.find(EncodeMorton<3>(
+      const auto it = data.target->index.find(EncodeMorton<3>(
           {static_cast<uint32_t>(x), static_cast<uint32_t>(y), static_cast<uint32_t>(z)}));
-      return it == data.target_index.end() ? -1 : it->second;
+      return it == data.target->index.end() ? -1 : it->second;
     };
     int slot = 0;
     if (block == 27) {
@@ -272,9 +363,11 @@ Linearization Linearize(const Octree& source, const Octree& target, DepthData& d
   const Octree::Level& t_level = target.level(data.depth);
   const Octree::Level& s_level = source.level(data.depth);
   double prior_sum = 0.0;
-  for (size_t k = 0; k < data.source_nodes.size(); ++k) {
-    lin.used_count += s_level.count[data.source_nodes[k]];
-    const Eigen::Vector3d q = R * data.source_mean[k] + t;
+  const SourceDepth& sd = *data.source;
+  TargetDepth& td = *data.target;
+  for (size_t k = 0; k < sd.nodes.size(); ++k) {
+    lin.used_count += s_level.count[sd.nodes[k]];
+    const Eigen::Vector3d q = R * sd.mean[k] + t;
     const int32_t j = FindPartner(target, data, k, q, max_d2);
     if (j < 0) continue;
     Correspondence c;
@@ -282,7 +375,7 @@ Linearization Linearize(const Octree& source, const Octree& target, DepthData& d
     c.j = j;
     c.moved = q;
     c.target_mean = t_level.center_of_mass[j].cast<double>();
-    c.weight = data.source_prior[k];
+    c.weight = sd.prior[k];
     if (options.weights == WeightScheme::kInverseDensity) c.weight *= t_level.inverse_density[j];
     prior_sum += c.weight;
     corr.push_back(c);
@@ -295,7 +388,7 @@ Linearization Linearize(const Octree& source, const Octree& target, DepthData& d
   auto unmatched_weight = [&](double prior) {
     return options.weights == WeightScheme::kInverseDensity ? prior * mean_target_density : prior;
   };
-  for (double prior : data.source_prior) {
+  for (double prior : sd.prior) {
     lin.cost += unmatched_weight(prior) * c2;  // matched nodes replace their share below
   }
   if (corr.empty() || !(prior_sum > 0.0)) return lin;
@@ -306,18 +399,21 @@ Linearization Linearize(const Octree& source, const Octree& target, DepthData& d
   double weight_sum = 0.0;
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
   for (Correspondence& c : corr) {
-    if (!data.target_ready[c.j]) {
-      data.target_regularized[c.j] = Regularize(target, data.depth, c.j, data.edge_target, options);
-      data.target_ready[c.j] = 1;
+    if (!td.ready[c.j]) {
+      td.regularized[c.j] = Regularize(target, data.depth, c.j, data.edge_target, options);
+      td.ready[c.j] = 1;
     }
-    const RegularizedNode& tn = data.target_regularized[c.j];
-    const Eigen::Matrix3d combined =
-        tn.covariance + R * data.source_covariance[c.k] * R.transpose();
+    const RegularizedNode& tn = td.regularized[c.j];
+    const RegularizedNode& sn = sd.regularized[c.k];
+    const Eigen::Vector3d m = R * sn.normal;  // the source's normal in the target frame
+    Eigen::Matrix3d combined = (tn.iso + sn.iso) * Eigen::Matrix3d::Identity();
+    combined.noalias() -= tn.flat * tn.normal * tn.normal.transpose();
+    combined.noalias() -= sn.flat * m * m.transpose();
     c.information = combined.inverse();
     const Eigen::Vector3d r = c.target_mean - c.moved;
     const double e2 = r.dot(c.information * r);
     const double g = c2 / (c2 + e2);
-    lin.cost += c.weight * c2 * e2 / (c2 + e2) - unmatched_weight(data.source_prior[c.k]) * c2;
+    lin.cost += c.weight * c2 * e2 / (c2 + e2) - unmatched_weight(sd.prior[c.k]) * c2;
     c.robust = g * g;
     lin.robust_sum += c.robust;
     c.weight *= prior_scale * c.robust;
@@ -325,7 +421,7 @@ Linearization Linearize(const Octree& source, const Octree& target, DepthData& d
     centroid += c.weight * c.target_mean;
     const double dist = tn.planar ? std::abs(tn.normal.dot(r)) : r.norm();
     if (dist <= inlier_distance) {
-      const double count = s_level.count[data.source_nodes[c.k]];
+      const double count = s_level.count[sd.nodes[c.k]];
       lin.inlier_count += count;
       lin.inlier_sq_sum += count * dist * dist;
       ++lin.inlier_nodes;
@@ -333,17 +429,35 @@ Linearization Linearize(const Octree& source, const Octree& target, DepthData& d
   }
   if (!(weight_sum > 0.0)) return lin;
   lin.center = centroid / weight_sum;
+  // H += J^T W J and b += J^T W r with J = [[a]x, -I] (a = moved CoM about the centre) and
+  // W = weight * information, written out in 3x3 blocks: with Q = [a]x W, J^T W J is
+  // [[-Q [a]x, Q], [Q^T, W]] and J^T W r is [(W r) x a, -W r] (about a third of the products of
+  // the 6x3 form, in the loop that dominates the refinement's time).
+  Eigen::Matrix3d H_rr = Eigen::Matrix3d::Zero();
+  Eigen::Matrix3d H_rt = Eigen::Matrix3d::Zero();
+  Eigen::Matrix3d H_tt = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d b_r = Eigen::Vector3d::Zero();
+  Eigen::Vector3d b_t = Eigen::Vector3d::Zero();
   for (const Correspondence& c : corr) {
     const Eigen::Vector3d a = c.moved - lin.center;
     const Eigen::Vector3d arm = c.target_mean - lin.center;
     lin.spread.noalias() += c.weight * arm * arm.transpose();
-    Eigen::Matrix<double, 3, 6> J;
-    J.leftCols<3>() = Skew(a);
-    J.rightCols<3>() = -Eigen::Matrix3d::Identity();
-    const Eigen::Matrix<double, 6, 3> JtW = c.weight * J.transpose() * c.information;
-    lin.H.noalias() += JtW * J;
-    lin.b.noalias() += JtW * (c.target_mean - c.moved);
+    const Eigen::Matrix3d W = c.weight * c.information;
+    Eigen::Matrix3d Q;
+    for (int j = 0; j < 3; ++j) Q.col(j) = a.cross(W.col(j));
+    for (int i = 0; i < 3; ++i) H_rr.row(i) += a.cross(Q.row(i).transpose()).transpose();
+    H_rt += Q;
+    H_tt += W;
+    const Eigen::Vector3d Wr = W * (c.target_mean - c.moved);
+    b_r += Wr.cross(a);
+    b_t -= Wr;
   }
+  lin.H.topLeftCorner<3, 3>() = H_rr;
+  lin.H.topRightCorner<3, 3>() = H_rt;
+  lin.H.bottomLeftCorner<3, 3>() = H_rt.transpose();
+  lin.H.bottomRightCorner<3, 3>() = H_tt;
+  lin.b.head<3>() = b_r;
+  lin.b.tail<3>() = b_t;
   lin.spread /= weight_sum;
   return lin;
 }
@@ -590,6 +704,14 @@ absl::Status ValidateTreeRefinement(const Octree& source, const Octree& target,
 absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const Octree& target,
                                                    const Eigen::Isometry3d& initial_T_target_source,
                                                    const TreeRefinementOptions& options) {
+  TreeRefinementCache cache;
+  return RefineOnTrees(source, target, initial_T_target_source, options, cache);
+}
+
+absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const Octree& target,
+                                                   const Eigen::Isometry3d& initial_T_target_source,
+                                                   const TreeRefinementOptions& options,
+                                                   TreeRefinementCache& cache) {
   const auto start = std::chrono::steady_clock::now();
   if (absl::Status status =
           ValidateTreeRefinement(source, target, initial_T_target_source, options);
@@ -597,6 +719,8 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
     return status;
   }
   const auto [coarsest, finest] = StageDepths(source, target, options);
+  TreeRefinementCache::Impl& shared = *cache.impl_;
+  shared.BindTo(source, target);
 
   TreeRefinementResult result;
   result.T_target_source = initial_T_target_source;
@@ -639,9 +763,14 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
       Eigen::Vector3d stage_t = rebin ? Eigen::Vector3d::Zero() : t;
       TreeRefinementOptions stage_options = options;
       if (rebin) stage_options.covariance_epsilon = options.coarse_covariance_epsilon;
-      DepthData data = PrepareDepth(stage_source, target, depth, stage_options);
+      // Re-binned cells are new at every round; the source's own cells and the target's side
+      // come from the cache (shared with the other rounds and starts).
+      std::optional<SourceDepth> rebinned_side;
+      if (rebin) PrepareSourceDepth(*rebinned, depth, stage_options, rebinned_side.emplace());
+      DepthData data = MakeDepthData(rebin ? *rebinned_side : shared.Source(depth, stage_options),
+                                     shared.Target(depth, stage_options), stage_options);
       stage.cell_edge = data.edge_target;
-      stage.source_nodes = static_cast<int>(data.source_nodes.size());
+      stage.source_nodes = static_cast<int>(data.source->nodes.size());
       stage.prepare_seconds = SecondsSince(stage_start);
       const StageOutcome outcome = RunStage(stage_source, target, data, is_finest, stage_options,
                                             corr, stage_R, stage_t, stage, result);
@@ -711,7 +840,8 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
   }
   result.fitness_depth = fitness_depth;
   if (fitness_depth != finest) {
-    DepthData data = PrepareDepth(source, target, fitness_depth, options);
+    DepthData data = MakeDepthData(shared.Source(fitness_depth, options),
+                                   shared.Target(fitness_depth, options), options);
     final_lin = Linearize(source, target, data, R, t, options, corr);
   }
   result.inliers = final_lin.inlier_nodes;

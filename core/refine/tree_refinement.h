@@ -44,6 +44,7 @@
 #define RPSR_CORE_REFINE_TREE_REFINEMENT_H_
 
 #include <array>
+#include <memory>
 #include <string>
 #include <utility>
 #include <vector>
@@ -236,6 +237,30 @@ absl::Status ValidateTreeRefinement(const Octree& source, const Octree& target,
                                     const Eigen::Isometry3d& initial_T_target_source,
                                     const TreeRefinementOptions& options = {});
 
+// What several RefineOnTrees calls on the same two trees share (the registrar's starts, a
+// re-binned depth's rounds): per depth and regularisation, the target's cell index and its
+// regularised nodes, and the source's own nodes regularised. The values are the same as without
+// it; only the work is done once (the eigen-decompositions of the nodes' shapes were a quarter
+// of a LiDAR refinement's time). Bound to the trees of the call that uses it (by address; a call
+// on other trees starts it afresh), so the trees must stay alive and unchanged while it is used
+// with them. One thread at a time.
+class TreeRefinementCache {
+ public:
+  TreeRefinementCache();
+  ~TreeRefinementCache();
+  TreeRefinementCache(TreeRefinementCache&&) noexcept;
+  TreeRefinementCache& operator=(TreeRefinementCache&&) noexcept;
+
+  struct Impl;  // tree_refinement.cc
+
+ private:
+  friend absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree&, const Octree&,
+                                                            const Eigen::Isometry3d&,
+                                                            const TreeRefinementOptions&,
+                                                            TreeRefinementCache&);
+  std::unique_ptr<Impl> impl_;
+};
+
 // Refines `initial_T_target_source`. Errors (InvalidArgument): a non-finite or non-rigid initial
 // transform, empty trees, depths outside the trees or coarsest > finest, non-positive iteration
 // counts, thresholds or scales. Geometric failures (no overlap, degeneracy) are NOT errors: they
@@ -243,6 +268,11 @@ absl::Status ValidateTreeRefinement(const Octree& source, const Octree& target,
 absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const Octree& target,
                                                    const Eigen::Isometry3d& initial_T_target_source,
                                                    const TreeRefinementOptions& options = {});
+// The same, sharing `cache` with other calls on these two trees.
+absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const Octree& target,
+                                                   const Eigen::Isometry3d& initial_T_target_source,
+                                                   const TreeRefinementOptions& options,
+                                                   TreeRefinementCache& cache);
 
 }  // namespace rpsr::core
 

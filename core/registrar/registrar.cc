@@ -35,18 +35,21 @@ bool Better(const TreeRefinementResult& a, const TreeRefinementResult& b) {
   return a.inlier_rmse < b.inlier_rmse;
 }
 
+// `cache` is shared by every start on the pair (the nodes' regularisation is done once).
 absl::StatusOr<TreeRefinementResult> RefineWithFallback(const Octree& source, const Octree& target,
                                                         const Eigen::Isometry3d& from,
-                                                        const TreeRefinementOptions& options) {
+                                                        const TreeRefinementOptions& options,
+                                                        TreeRefinementCache& cache) {
   const auto [coarsest, finest] = StageDepths(source, target, options);
   if (options.coarsest_depth >= 0 || options.evaluate_only || finest - 4 <= coarsest) {
-    return RefineOnTrees(source, target, from, options);
+    return RefineOnTrees(source, target, from, options, cache);
   }
   TreeRefinementOptions finer_start = options;
   finer_start.coarsest_depth = finest - 4;
-  absl::StatusOr<TreeRefinementResult> first = RefineOnTrees(source, target, from, finer_start);
+  absl::StatusOr<TreeRefinementResult> first =
+      RefineOnTrees(source, target, from, finer_start, cache);
   if (!first.ok() || first->valid) return first;
-  absl::StatusOr<TreeRefinementResult> second = RefineOnTrees(source, target, from, options);
+  absl::StatusOr<TreeRefinementResult> second = RefineOnTrees(source, target, from, options, cache);
   if (!second.ok()) return first;
   return Better(*second, *first) ? second : first;
 }
@@ -266,8 +269,9 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   Eigen::Isometry3d from = initial;
   if (options.mode != RegistrationMode::kRefine) from = result.net_T_target_source;
   if (options.mode == RegistrationMode::kNet) refinement.evaluate_only = true;
+  TreeRefinementCache cache;
   absl::StatusOr<TreeRefinementResult> refined =
-      RefineWithFallback(source, target, from, refinement);
+      RefineWithFallback(source, target, from, refinement, cache);
   double confidence_seconds = 0.0;
   // Fills `out` from a refinement that started at `start_pose`, confidence included.
   auto settle = [&](const TreeRefinementResult& r, const Eigen::Isometry3d& start_pose,
@@ -308,7 +312,7 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   if (options.mode == RegistrationMode::kNetRefine && options.also_refine_from_initial &&
       result.confidence < kConfidentEnough && !NearlyEqual(from, initial, target)) {
     absl::StatusOr<TreeRefinementResult> from_initial =
-        RefineWithFallback(source, target, initial, refinement);
+        RefineWithFallback(source, target, initial, refinement, cache);
     if (from_initial.ok() && ClearlyBetter(*from_initial, *refined)) {
       settle(*from_initial, initial, result);
     }

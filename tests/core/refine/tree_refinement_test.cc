@@ -221,6 +221,53 @@ TEST(TreeRefinementTest, DeterministicAndNeedsOnlyTrees) {
   EXPECT_EQ(a->information, b->information);
 }
 
+// A cache shared by several calls (the registrar's starts) only saves work: every call returns
+// what a fresh call returns, bit for bit, whatever ran before it with the cache (other starts,
+// other depths and regularisation, other trees: the cache re-binds to them).
+TEST(TreeRefinementTest, SharedCacheChangesNothing) {
+  PairOptions pair_options;
+  pair_options.num_points = 2048;
+  auto pair = MakeObjectPair(pair_options, 5);
+  auto other = MakeObjectPair(pair_options, 6);
+  ASSERT_TRUE(pair.ok() && other.ok());
+  const Octree source = TreeOf(pair->source, 6);
+  const Octree target = TreeOf(pair->target, 6);
+  const Octree other_source = TreeOf(other->source, 6);
+  const Octree other_target = TreeOf(other->target, 6);
+  std::mt19937_64 rng(2);
+  TreeRefinementOptions finer;
+  finer.coarsest_depth = 4;
+  TreeRefinementOptions own_cells;
+  own_cells.rebin_coarse_depths = false;
+  own_cells.covariance_epsilon = 3e-3;
+  struct Call {
+    const Octree* source;
+    const Octree* target;
+    Eigen::Isometry3d initial;
+    TreeRefinementOptions options;
+  };
+  const std::vector<Call> calls = {
+      {&source, &target, Perturbed(pair->T_target_source, 10 * kDeg, 0.05, rng), {}},
+      {&source, &target, Eigen::Isometry3d::Identity(), {}},
+      {&source, &target, Perturbed(pair->T_target_source, 5 * kDeg, 0.02, rng), finer},
+      {&source, &target, Perturbed(pair->T_target_source, 5 * kDeg, 0.02, rng), own_cells},
+      {&other_source, &other_target, Perturbed(other->T_target_source, 8 * kDeg, 0.04, rng), {}},
+      {&source, &target, Eigen::Isometry3d::Identity(), {}},
+  };
+  TreeRefinementCache cache;
+  for (size_t i = 0; i < calls.size(); ++i) {
+    const Call& c = calls[i];
+    auto fresh = RefineOnTrees(*c.source, *c.target, c.initial, c.options);
+    auto shared = RefineOnTrees(*c.source, *c.target, c.initial, c.options, cache);
+    ASSERT_TRUE(fresh.ok() && shared.ok()) << i;
+    EXPECT_EQ(fresh->T_target_source.matrix(), shared->T_target_source.matrix()) << "call " << i;
+    EXPECT_EQ(fresh->iterations, shared->iterations) << "call " << i;
+    EXPECT_EQ(fresh->fitness, shared->fitness) << "call " << i;
+    EXPECT_EQ(fresh->information, shared->information) << "call " << i;
+    EXPECT_EQ(fresh->valid, shared->valid) << "call " << i;
+  }
+}
+
 TEST(TreeRefinementTest, EvaluateOnlyMeasuresWithoutMoving) {
   PairOptions pair_options;
   pair_options.num_points = 2048;
