@@ -351,7 +351,11 @@ class SessionState {
     absl::MutexLock lock(&mutex_);
     return session_id_;
   }
-  const SessionOptions& options() const { return effective_; }
+  // A copy: a re-creation on another thread rewrites them.
+  SessionOptions options() const {
+    absl::MutexLock lock(&mutex_);
+    return effective_;
+  }
   std::shared_ptr<ClientChannel> shared_channel() { return channel_; }
   const std::string& affinity_key() const { return affinity_key_; }
 
@@ -566,7 +570,7 @@ class SessionState {
   std::shared_ptr<ClientChannel> channel_;
   const SessionOptions requested_;
   const std::string affinity_key_;  // see ClientChannel::NewAffinityKey
-  SessionOptions effective_;
+  SessionOptions effective_ ABSL_GUARDED_BY(mutex_);
   mutable absl::Mutex mutex_;
   std::string session_id_ ABSL_GUARDED_BY(mutex_);
   uint64_t generation_ ABSL_GUARDED_BY(mutex_) = 0;
@@ -578,7 +582,7 @@ class SessionState {
 Session::Session(std::shared_ptr<SessionState> state) : state_(std::move(state)) {}
 Session::~Session() = default;
 std::string Session::id() const { return state_->id(); }
-const SessionOptions& Session::options() const { return state_->options(); }
+SessionOptions Session::options() const { return state_->options(); }
 
 absl::StatusOr<UploadedCloud> Session::Upload(absl::Span<const Eigen::Vector3f> points) {
   return state_->Upload(points);

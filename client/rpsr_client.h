@@ -138,7 +138,7 @@ struct UploadedCloud {
 struct RegisterOptions {
   // "net", "net+refine" or "refine"; empty: the server's default (net+refine).
   std::string mode;
-  int passes = 0;  // network passes; 0: the model's default
+  int passes = 0;  // network passes; 0: the mode's default (net: the model's; net+refine: 2)
   std::optional<Eigen::Isometry3d> initial_T_target_source;
   // Server-side time budget (queued requests past it are dropped unrun); zero: none.
   absl::Duration server_deadline = absl::ZeroDuration();
@@ -230,8 +230,9 @@ class Session {
   // The server's current id of this session (it changes if the session expired and was
   // re-created).
   std::string id() const;
-  // The effective options (defaults filled in by the server).
-  const SessionOptions& options() const;
+  // The effective options (defaults filled in by the server), as of the session's latest
+  // creation: a copy, since a re-creation on another thread may change them.
+  SessionOptions options() const;
 
   absl::StatusOr<UploadedCloud> Upload(absl::Span<const Eigen::Vector3f> points);
   std::future<absl::StatusOr<UploadedCloud>> UploadAsync(std::vector<Eigen::Vector3f> points);

@@ -38,7 +38,8 @@ ABSL_FLAG(int, level, 2,
           "0.01,0.02,0.03,0.05,0.08)");
 ABSL_FLAG(int, batch_size, 16, "pairs per forward pass (train: per optimisation step)");
 ABSL_FLAG(int, passes, 0,
-          "network passes (Sec. 3.3); 0: 3 for train, the model's own number for eval");
+          "network passes (Sec. 3.3); 0: 3 for train; elsewhere the mode's default: the "
+          "model's own number for net, 2 for net+refine");
 ABSL_FLAG(int, threads, 1, "LibTorch intra-op threads");
 ABSL_FLAG(std::string, model, "",
           "eval, calibrate: a weights file (.rpsrw) or the name of a model embedded in the binary "

@@ -85,6 +85,12 @@ constexpr int kNetMinDepth = 5;
 
 bool UsesNet(RegistrationMode mode) { return mode != RegistrationMode::kRefine; }
 
+int DefaultPasses(const RegistrationOptions& options, int model_passes) {
+  if (options.passes > 0) return options.passes;
+  if (options.mode == RegistrationMode::kNetRefine) return std::min(model_passes, kNetRefinePasses);
+  return model_passes;
+}
+
 absl::Status CheckRigid(const Eigen::Isometry3d& T) {
   const Eigen::Matrix4d& m = T.matrix();
   if (!m.allFinite()) {
@@ -232,10 +238,10 @@ absl::StatusOr<std::unique_ptr<Registrar>> Registrar::Create(const RegistrarConf
   const RpsrNetConfig& c = state.net->config();
   state.description = absl::StrFormat(
       "%s: RPSRNet conv widths %d/%d/%d, embedding %d, %d heads, feed-forward %d, %d "
-      "parameters, %d passes by default; confidence: %s",
+      "parameters, %d passes by default (net+refine: %d); confidence: %s",
       model_name, c.conv_widths[0], c.conv_widths[1], c.conv_widths[2], c.embedding_width,
       c.attention_heads, c.feedforward_width, state.net->NumParameters(), c.passes,
-      confidence_source);
+      std::min(c.passes, kNetRefinePasses), confidence_source);
   return registrar;
 }
 
@@ -361,8 +367,7 @@ std::vector<absl::StatusOr<RegistrationResult>> Registrar::RegisterBatch(
   std::map<int, std::vector<size_t>> groups;
   for (size_t i = 0; i < requests.size(); ++i) {
     if (!ok[i] || !UsesNet(requests[i].options.mode)) continue;
-    const int passes =
-        requests[i].options.passes > 0 ? requests[i].options.passes : state_->net->config().passes;
+    const int passes = DefaultPasses(requests[i].options, state_->net->config().passes);
     groups[passes].push_back(i);
   }
   for (const auto& [passes, members] : groups) {

@@ -30,13 +30,18 @@ TEST(RegistrarSecondStartTest, KeepsTheBetterOfTheNetworksStartAndTheGuess) {
     const Eigen::Isometry3d truth =
         simulator->T_world_lidar()[first + 5].inverse() * simulator->T_world_lidar()[first];
 
-    RegistrationOptions network_start;
+    // Three network passes (net+refine's default is two, kNetRefinePasses): with them the
+    // network's start goes astray on one of these frames, the case this test needs; with two
+    // it does on none of the four.
+    RegistrationOptions defaults;
+    defaults.passes = 3;
+    RegistrationOptions network_start = defaults;
     network_start.also_refine_from_initial = false;
     RegistrationOptions guess_start;
     guess_start.mode = RegistrationMode::kRefine;
     auto a = SharedRegistrar().Register(source, target, network_start);
     auto b = SharedRegistrar().Register(source, target, guess_start);
-    auto both = SharedRegistrar().Register(source, target);  // the default: second start on
+    auto both = SharedRegistrar().Register(source, target, defaults);  // second start on
     ASSERT_TRUE(a.ok() && b.ok() && both.ok());
 
     const bool is_a = both->T_target_source.isApprox(a->T_target_source, 1e-9);
