@@ -107,13 +107,19 @@ struct RegistrationService::Shared {
   }
   void ReleaseStream() { open_streams.fetch_sub(1); }
 
-  // What every UploadCloud and Track stream checks first, in this order: admission, the caller's
-  // token, a stream slot. On success the caller holds a slot (ReleaseStream in OnDone) and gets
-  // its identity.
+  // What every call checks first, in this order: admission (draining, model loaded), then the
+  // caller's token. Returns the caller's identity.
+  absl::StatusOr<std::string> AdmitCaller(const grpc::CallbackServerContext* context,
+                                          bool needs_model) const {
+    if (absl::Status admitted = Admit(needs_model); !admitted.ok()) return admitted;
+    return Authenticate(context);
+  }
+
+  // AdmitCaller, then a stream slot, for UploadCloud and Track. On success the caller holds a
+  // slot (ReleaseStream in OnDone) and gets its identity.
   absl::StatusOr<std::string> OpenStream(const grpc::CallbackServerContext* context,
                                          bool needs_model) {
-    if (absl::Status admitted = Admit(needs_model); !admitted.ok()) return admitted;
-    absl::StatusOr<std::string> caller = Authenticate(context);
+    absl::StatusOr<std::string> caller = AdmitCaller(context, needs_model);
     if (!caller.ok()) return caller.status();
     if (absl::Status slot = AcquireStream(); !slot.ok()) return slot;
     return caller;
@@ -314,9 +320,7 @@ class RegisterReactor final : public grpc::ServerUnaryReactor {
  private:
   absl::Status Start(const grpc::CallbackServerContext* context,
                      const v1::RegisterRequest& request) {
-    absl::Status admitted = shared_->Admit(/*needs_model=*/true);
-    if (!admitted.ok()) return admitted;
-    absl::StatusOr<std::string> caller = shared_->Authenticate(context);
+    absl::StatusOr<std::string> caller = shared_->AdmitCaller(context, /*needs_model=*/true);
     if (!caller.ok()) return caller.status();
     absl::StatusOr<core::RegistrationOptions> options = OptionsFromProto(request.options());
     if (!options.ok()) return options.status();
@@ -698,11 +702,8 @@ template <typename Handler>
 grpc::ServerUnaryReactor* RunUnary(Shared* shared, absl::string_view method,
                                    grpc::CallbackServerContext* context, Handler handler) {
   CallRecord record(shared, method, context);
-  absl::Status status = shared->Admit(/*needs_model=*/false);
-  if (status.ok()) {
-    absl::StatusOr<std::string> caller = shared->Authenticate(context);
-    status = caller.ok() ? handler(*caller) : caller.status();
-  }
+  absl::StatusOr<std::string> caller = shared->AdmitCaller(context, /*needs_model=*/false);
+  const absl::Status status = caller.ok() ? handler(*caller) : caller.status();
   record.Finished(status);
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
   reactor->Finish(ToGrpc(status));
