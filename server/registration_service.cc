@@ -195,11 +195,25 @@ using Shared = RegistrationService::Shared;
 grpc::Status ToGrpc(const absl::Status& status) { return ToGrpcStatus(status); }
 
 // Metrics and one log line per finished call.
+// The session affinity key a client sent (x-rpsr-affinity, deploy/envoy/envoy.yaml), cut to 64
+// characters: the request log names it so an operator sees how a balancer spread the sessions.
+// "" when absent.
+std::string AffinityKeyOf(const grpc::CallbackServerContext* context) {
+  const auto& metadata = context->client_metadata();
+  auto it = metadata.find("x-rpsr-affinity");
+  if (it == metadata.end()) return "";
+  return std::string(it->second.data(), std::min<size_t>(it->second.size(), 64));
+}
+
 class CallRecord {
  public:
   CallRecord(const Shared* shared, absl::string_view method,
              const grpc::CallbackServerContext* context)
-      : shared_(shared), method_(method), peer_(context->peer()), start_(absl::Now()) {}
+      : shared_(shared),
+        method_(method),
+        peer_(context->peer()),
+        affinity_(AffinityKeyOf(context)),
+        start_(absl::Now()) {}
 
   absl::Time start() const { return start_; }
   double elapsed_seconds() const { return absl::ToDoubleSeconds(absl::Now() - start_); }
@@ -216,6 +230,7 @@ class CallRecord {
                 {"code", std::string(code)},
                 {"seconds", absl::StrFormat("%.6f", seconds)},
                 {"peer", peer_},
+                {"affinity", affinity_},
                 {"detail", std::string(detail)}});
     } else {
       LogEvent("warn", "call",
@@ -223,6 +238,7 @@ class CallRecord {
                 {"code", std::string(code)},
                 {"seconds", absl::StrFormat("%.6f", seconds)},
                 {"peer", peer_},
+                {"affinity", affinity_},
                 {"error", std::string(status.message())}});
     }
   }
@@ -231,6 +247,7 @@ class CallRecord {
   const Shared* shared_;
   absl::string_view method_;
   std::string peer_;
+  std::string affinity_;
   absl::Time start_;
 };
 

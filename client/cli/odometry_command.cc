@@ -195,16 +195,19 @@ absl::StatusOr<std::vector<Step>> RunLocally(const std::vector<std::string>& fra
   if (!previous.ok()) return previous.status();
   std::optional<core::Octree> previous_tree;
   Eigen::Isometry3d motion = Eigen::Isometry3d::Identity();
+  // Depth and mode are chosen once, from the first frame, as the server path does for its
+  // session: chosen per pair, a sequence whose extent crosses the scene-scale threshold would
+  // pair trees of different depths and switch modes mid-way.
+  const int depth = ChooseTreeDepth(*previous, *previous, requested_depth);
+  const std::string mode =
+      ChooseMode(*previous, *previous, requested_mode, model_flag.empty() ? "objects" : model_flag,
+                 nullptr, absl::GetFlag(FLAGS_constant_velocity));
+  core::BarnesHutTreeOptions tree_options;
+  tree_options.max_depth = depth;
   FrameProgress progress(static_cast<int>(frames.size()));
   for (size_t i = 1; i < frames.size(); ++i) {
     absl::StatusOr<core::PointCloud> current = reader.Next(i);
     if (!current.ok()) return current.status();
-    const int depth = ChooseTreeDepth(*current, *previous, requested_depth);
-    const std::string mode =
-        ChooseMode(*current, *previous, requested_mode, model_flag.empty() ? "objects" : model_flag,
-                   nullptr, absl::GetFlag(FLAGS_constant_velocity));
-    core::BarnesHutTreeOptions tree_options;
-    tree_options.max_depth = depth;
     if (!previous_tree) {
       absl::StatusOr<core::Octree> tree = core::BuildOctree(*previous, tree_options);
       if (!tree.ok())

@@ -13,11 +13,14 @@
 #include <fstream>
 #include <future>
 #include <iterator>
+#include <map>
+#include <set>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
 #include "core/data/pair_manifest.h"
 #include "core/data/registration_metrics.h"
 #include "core/io/point_cloud_io.h"
@@ -381,6 +384,65 @@ TEST(RpsrClientRecoveryTest, ConnectsOverTlsWithTheServersRoot) {
   ASSERT_TRUE(plain.ok());
   EXPECT_EQ((*plain)->GetServerInfo().status().code(), absl::StatusCode::kUnavailable);
   std::filesystem::remove_all(dir);
+}
+
+// The value of `name=` in a logfmt line ("" when absent; quotes stripped).
+std::string LogField(absl::string_view line, absl::string_view name) {
+  const std::string key = absl::StrCat(" ", name, "=");
+  const size_t at = line.find(key);
+  if (at == absl::string_view::npos) return "";
+  absl::string_view rest = line.substr(at + key.size());
+  if (!rest.empty() && rest.front() == '"') {
+    rest.remove_prefix(1);
+    return std::string(rest.substr(0, rest.find('"')));
+  }
+  return std::string(rest.substr(0, rest.find(' ')));
+}
+
+// Every call of one session carries the same x-rpsr-affinity key, so that a balancer hashing it
+// (deploy/envoy/envoy.yaml) keeps the session, whose clouds live in one server's memory, on one
+// server; two sessions carry different keys, so sessions spread. Read off the real server's
+// request log, which names each call's key.
+TEST(RpsrClientAffinityTest, EveryCallOfASessionCarriesOneKeyAndSessionsDiffer) {
+  server::ServerOptions options = TestServerOptions();
+  options.log_requests = true;
+  absl::StatusOr<std::unique_ptr<server::RunningServer>> running = server::StartServer(options);
+  ASSERT_TRUE(running.ok()) << running.status();
+  const SamplePair sample = LoadSample("object");
+  ::testing::internal::CaptureStderr();
+  {
+    absl::StatusOr<std::unique_ptr<Client>> client = Client::Connect(At((*running)->target()));
+    ASSERT_TRUE(client.ok()) << client.status();
+    for (int s = 0; s < 2; ++s) {
+      absl::StatusOr<std::unique_ptr<Session>> session = (*client)->CreateSession(TreeDepth(6));
+      ASSERT_TRUE(session.ok()) << session.status();
+      absl::StatusOr<UploadedCloud> source = (*session)->Upload(sample.source.points);
+      absl::StatusOr<UploadedCloud> target = (*session)->Upload(sample.target.points);
+      ASSERT_TRUE(source.ok() && target.ok());
+      ASSERT_TRUE((*session)->Register(source->cloud_id, target->cloud_id).ok());
+      ASSERT_TRUE((*session)->Release(source->cloud_id).ok());
+    }  // each session closes as it goes out of scope
+  }
+  const std::string log = ::testing::internal::GetCapturedStderr();
+  const std::set<std::string> session_methods = {"CreateSession", "UploadCloud", "Register",
+                                                 "ReleaseCloud", "CloseSession"};
+  std::map<std::string, std::multiset<std::string>> methods_by_key;
+  for (absl::string_view line : absl::StrSplit(log, '\n')) {
+    if (LogField(line, "event") != "call") continue;
+    const std::string method = LogField(line, "method");
+    if (session_methods.count(method) == 0) continue;
+    const std::string key = LogField(line, "affinity");
+    EXPECT_FALSE(key.empty()) << "a session call without a key: " << line;
+    methods_by_key[key].insert(method);
+  }
+  ASSERT_EQ(methods_by_key.size(), 2u) << log;
+  for (const auto& [key, methods] : methods_by_key) {
+    EXPECT_EQ(methods.count("CreateSession"), 1u) << key;
+    EXPECT_EQ(methods.count("UploadCloud"), 2u) << key;
+    EXPECT_EQ(methods.count("Register"), 1u) << key;
+    EXPECT_EQ(methods.count("ReleaseCloud"), 1u) << key;
+    EXPECT_EQ(methods.count("CloseSession"), 1u) << key;
+  }
 }
 
 TEST(RpsrClientOptionsTest, ConnectRejectsBadOptions) {
