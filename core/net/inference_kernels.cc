@@ -69,15 +69,20 @@ torch::Tensor MaxOverSlots(const torch::Tensor& features, const torch::Tensor& s
           }
           continue;
         }
+        // Selects rather than branches, so that the compiler vectorises the channel loops (as
+        // branches they were a tenth of an object pair's network time).
         if (k == rows) {
           for (int64_t c = 0; c < channels; ++c) {
-            if (o[c] < 0.0f) o[c] = 0.0f;
+            const float current = o[c];
+            o[c] = current < 0.0f ? 0.0f : current;  // an empty child is a zero row; NaN stays
           }
         } else {
           const float* r = in + k * channels;
-          // NaN wins, as in torch::max.
+          // NaN wins, as in torch::max (v != v: NaN).
           for (int64_t c = 0; c < channels; ++c) {
-            if (r[c] > o[c] || std::isnan(r[c])) o[c] = r[c];
+            const float v = r[c];
+            const float current = o[c];
+            o[c] = (v > current || v != v) ? v : current;
           }
         }
       }
