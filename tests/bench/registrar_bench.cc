@@ -15,6 +15,7 @@
 #include "core/net/rpsr_net.h"
 #include "core/registrar/registrar.h"
 #include "core/synth/lidar_sequence.h"
+#include "tests/bench/bench_clouds.h"
 
 namespace rpsr::core {
 namespace {
@@ -34,54 +35,26 @@ struct TreePairs {
   size_t size() const { return trees.size() / 2; }
 };
 
-Octree TreeOf(const PointCloud& cloud, int max_depth) {
+BarnesHutTreeOptions ToDepth(int max_depth) {
   BarnesHutTreeOptions options;
   options.max_depth = max_depth;
-  auto tree = BuildOctree(cloud, options);
-  if (!tree.ok()) std::abort();
-  return *std::move(tree);
+  return options;
 }
 
 const TreePairs& ObjectTrees() {
-  static const TreePairs* pairs = [] {
-    auto* out = new TreePairs;
-    PairOptions options;
-    options.num_points = 2048;
-    options.split = ObjectSplit::kM2Unseen;
-    for (int i = 0; i < 16; ++i) {
-      auto pair = MakeObjectPair(options, 100 + i);
-      if (!pair.ok()) std::abort();
-      out->trees.push_back(TreeOf(pair->source, 6));
-      out->trees.push_back(TreeOf(pair->target, 6));
-    }
-    return out;
-  }();
+  static const TreePairs* pairs =
+      new TreePairs{bench::TreesOf(bench::UnseenObjectClouds(16, 2048), ToDepth(6))};
   return *pairs;
-}
-
-PointCloud Thinned(const PointCloud& full, size_t num_points) {
-  if (full.size() < num_points) return full;
-  PointCloud cloud;
-  for (size_t i = 0; i < num_points; ++i) {
-    cloud.points.push_back(full.points[i * full.size() / num_points]);
-  }
-  return cloud;
 }
 
 const TreePairs& LidarTrees() {
   static const TreePairs* pairs = [] {
-    auto* out = new TreePairs;
     LidarSequenceOptions options;
     options.frame_count = 40;
     options.seed = 1;
     options.sensor.azimuth_steps = 2400;  // ~140k points, thinned to 120k
-    auto simulator = LidarSequenceSimulator::Create(options);
-    if (!simulator.ok()) std::abort();
-    for (int i = 0; i < 4; ++i) {
-      out->trees.push_back(TreeOf(Thinned(simulator->SimulateFrame(5 * i).cloud, 120000), 9));
-      out->trees.push_back(TreeOf(Thinned(simulator->SimulateFrame(5 * i + 5).cloud, 120000), 9));
-    }
-    return out;
+    return new TreePairs{
+        bench::TreesOf(bench::LidarCloudsFiveFramesApart(4, options, 120000), ToDepth(9))};
   }();
   return *pairs;
 }

@@ -12,6 +12,7 @@
 #include "core/data/object_pairs.h"
 #include "core/net/rpsr_net.h"
 #include "core/synth/lidar_sequence.h"
+#include "tests/bench/bench_clouds.h"
 
 namespace rpsr::core {
 namespace {
@@ -39,36 +40,19 @@ struct TreePairs {
 };
 
 const TreePairs& ObjectTrees() {
-  static const TreePairs* pairs = [] {
-    auto* out = new TreePairs;
-    PairOptions options;
-    options.num_points = 2048;
-    options.split = ObjectSplit::kM2Unseen;
-    for (int i = 0; i < 16; ++i) {
-      auto pair = MakeObjectPair(options, 100 + i);
-      if (!pair.ok()) std::abort();
-      out->trees.push_back(*BuildOctree(pair->source));
-      out->trees.push_back(*BuildOctree(pair->target));
-    }
-    return out;
-  }();
+  static const TreePairs* pairs =
+      new TreePairs{bench::TreesOf(bench::UnseenObjectClouds(16, 2048), BarnesHutTreeOptions{})};
   return *pairs;
 }
 
 const TreePairs& LidarTrees() {
   static const TreePairs* pairs = [] {
-    auto* out = new TreePairs;
     LidarSequenceOptions options;
     options.frame_count = 40;
-    auto simulator = LidarSequenceSimulator::Create(options);
-    if (!simulator.ok()) std::abort();
     BarnesHutTreeOptions tree_options;
     tree_options.max_depth = 8;
-    for (int i = 0; i < 4; ++i) {
-      out->trees.push_back(*BuildOctree(simulator->SimulateFrame(5 * i).cloud, tree_options));
-      out->trees.push_back(*BuildOctree(simulator->SimulateFrame(5 * i + 5).cloud, tree_options));
-    }
-    return out;
+    return new TreePairs{
+        bench::TreesOf(bench::LidarCloudsFiveFramesApart(4, options), tree_options)};
   }();
   return *pairs;
 }

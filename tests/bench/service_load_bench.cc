@@ -42,6 +42,7 @@
 #include "core/registrar/registrar.h"
 #include "core/tree/bh_tree.h"
 #include "server/dynamic_batcher.h"
+#include "tests/bench/bench_clouds.h"
 #ifdef RPSR_SERVICE_LOAD_BENCH_WITH_SERVER
 #include "grpcpp/grpcpp.h"
 #include "rpsr/v1/registration.grpc.pb.h"
@@ -151,26 +152,8 @@ struct ObjectTrees {
 
 ObjectTrees MakeObjectTrees(int pairs, int points) {
   ObjectTrees out;
-  core::PairOptions options;
-  options.num_points = static_cast<size_t>(points);
-  options.split = core::ObjectSplit::kM2Unseen;
-  for (int i = 0; i < pairs; ++i) {
-    auto pair = core::MakeObjectPair(options, 100 + i);
-    if (!pair.ok()) {
-      std::fprintf(stderr, "object pair: %s\n", pair.status().ToString().c_str());
-      std::exit(1);
-    }
-    out.clouds.push_back(pair->source);
-    out.clouds.push_back(pair->target);
-  }
-  for (const core::PointCloud& cloud : out.clouds) {
-    auto tree = core::BuildOctree(cloud);
-    if (!tree.ok()) {
-      std::fprintf(stderr, "tree: %s\n", tree.status().ToString().c_str());
-      std::exit(1);
-    }
-    out.trees.push_back(*std::move(tree));
-  }
+  out.clouds = bench::UnseenObjectClouds(pairs, static_cast<size_t>(points));
+  out.trees = bench::TreesOf(out.clouds, core::BarnesHutTreeOptions{});
   return out;
 }
 

@@ -25,6 +25,7 @@
 #include "core/refine/tree_refinement.h"
 #include "core/synth/lidar_sequence.h"
 #include "core/synth/shape_families.h"
+#include "tests/bench/bench_clouds.h"
 
 namespace rpsr::core {
 namespace {
@@ -40,14 +41,7 @@ Octree TreeOf(const PointCloud& cloud, int max_depth) {
   return *std::move(tree);
 }
 
-PointCloud Thinned(const PointCloud& full, size_t num_points) {
-  if (full.size() < num_points) return full;
-  PointCloud cloud;
-  for (size_t i = 0; i < num_points; ++i) {
-    cloud.points.push_back(full.points[i * full.size() / num_points]);
-  }
-  return cloud;
-}
+using bench::Thinned;
 
 const LidarSequenceSimulator& Drive() {
   static const LidarSequenceSimulator* simulator = [] {
