@@ -15,6 +15,7 @@
 #include "core/data/registration_metrics.h"
 #include "core/io/file_bytes.h"
 #include "core/net/rpsr_net.h"
+#include "core/refine/correlative_start.h"
 #include "core/registrar/confidence_model.h"
 #include "core/registrar/embedded_models.h"
 
@@ -35,17 +36,22 @@ bool Better(const TreeRefinementResult& a, const TreeRefinementResult& b) {
   return a.inlier_rmse < b.inlier_rmse;
 }
 
+// Trees deep enough for the finer start below (scene-scale clouds: LiDAR scans to depth 9).
+bool IsDeepPair(const Octree& source, const Octree& target, const TreeRefinementOptions& options) {
+  const auto [coarsest, finest] = StageDepths(source, target, options);
+  return options.coarsest_depth < 0 && finest - 4 > coarsest;
+}
+
 // `cache` is shared by every start on the pair (the nodes' regularisation is done once).
 absl::StatusOr<TreeRefinementResult> RefineWithFallback(const Octree& source, const Octree& target,
                                                         const Eigen::Isometry3d& from,
                                                         const TreeRefinementOptions& options,
                                                         TreeRefinementCache& cache) {
-  const auto [coarsest, finest] = StageDepths(source, target, options);
-  if (options.coarsest_depth >= 0 || options.evaluate_only || finest - 4 <= coarsest) {
+  if (options.evaluate_only || !IsDeepPair(source, target, options)) {
     return RefineOnTrees(source, target, from, options, cache);
   }
   TreeRefinementOptions finer_start = options;
-  finer_start.coarsest_depth = finest - 4;
+  finer_start.coarsest_depth = StageDepths(source, target, options).second - 4;
   absl::StatusOr<TreeRefinementResult> first =
       RefineOnTrees(source, target, from, finer_start, cache);
   if (!first.ok() || first->valid) return first;
@@ -313,14 +319,31 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
     return result;
   }
   settle(*refined, from, result);
+  const TreeRefinementResult* best = &*refined;  // the answer settled so far
+  std::optional<TreeRefinementResult> best_storage;
   // The second start (RegistrationOptions::also_refine_from_initial) runs only when the first
   // answer is not already confident.
   if (options.mode == RegistrationMode::kNetRefine && options.also_refine_from_initial &&
       result.confidence < kConfidentEnough && !NearlyEqual(from, initial, target)) {
     absl::StatusOr<TreeRefinementResult> from_initial =
         RefineWithFallback(source, target, initial, refinement, cache);
-    if (from_initial.ok() && ClearlyBetter(*from_initial, *refined)) {
+    if (from_initial.ok() && ClearlyBetter(*from_initial, *best)) {
       settle(*from_initial, initial, result);
+      best_storage = *std::move(from_initial);
+      best = &*best_storage;
+    }
+  }
+  // The third start (RegistrationOptions::search_scene_start): scene-scale trees whose answer is
+  // still not confident.
+  if (options.mode == RegistrationMode::kNetRefine && options.search_scene_start &&
+      result.confidence < kConfidentEnough && IsDeepPair(source, target, refinement)) {
+    absl::StatusOr<CorrelativeStart> searched = FindCorrelativeStart(source, target, initial);
+    if (searched.ok()) {
+      absl::StatusOr<TreeRefinementResult> from_search =
+          RefineWithFallback(source, target, searched->T_target_source, refinement, cache);
+      if (from_search.ok() && ClearlyBetter(*from_search, *best)) {
+        settle(*from_search, searched->T_target_source, result);
+      }
     }
   }
   result.timings.refine_seconds = SecondsSince(refine_start) - confidence_seconds;

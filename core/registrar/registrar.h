@@ -70,6 +70,14 @@ struct RegistrationOptions {
   // nearly coincide. The confidence of either answer comes from the same model, calibrated on
   // this pipeline (its features include the network's, whichever start won).
   bool also_refine_from_initial = true;
+  // net+refine on scene-scale trees (deep enough for the refinement's finer start: LiDAR scans):
+  // when the answer is still below 0.9 confidence after those starts, search a start around the
+  // initial guess (FindCorrelativeStart: turns about z within +-20 degrees, shifts within +-22.5 m
+  // on a 240 m cube, scored by occupied cells; ~4 ms) and refine from it too, keeping that answer
+  // if it is clearly better. The object network is no LiDAR network and the refinement's basin
+  // does not hold every motion of 10 m: on 64 simulated LiDAR pairs 10 frames apart recall at
+  // (1 deg, 0.3 m) went 0.781 -> 0.938, on 64 pairs 5 frames apart it stayed 1.000.
+  bool search_scene_start = true;
   TreeRefinementOptions refinement;
 };
 

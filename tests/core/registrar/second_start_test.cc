@@ -5,8 +5,10 @@
 #include <vector>
 
 #include "core/data/registration_metrics.h"
+#include "core/data/training_pairs.h"
 #include "core/registrar/registrar.h"
 #include "core/synth/lidar_sequence.h"
+#include "core/synth/seeded_random.h"
 #include "gtest/gtest.h"
 #include "tests/core/registrar/registrar_test_util.h"
 
@@ -35,6 +37,7 @@ TEST(RegistrarSecondStartTest, KeepsTheBetterOfTheNetworksStartAndTheGuess) {
     // it does on none of the four.
     RegistrationOptions defaults;
     defaults.passes = 3;
+    defaults.search_scene_start = false;  // the third start has its own test below
     RegistrationOptions network_start = defaults;
     network_start.also_refine_from_initial = false;
     RegistrationOptions guess_start;
@@ -63,6 +66,37 @@ TEST(RegistrarSecondStartTest, KeepsTheBetterOfTheNetworksStartAndTheGuess) {
   // The object network is off its training distribution on scans: on these frames the second
   // start has to win at least once (1 of 4 when written), or this test no longer covers it.
   EXPECT_GE(from_guess, 1);
+}
+
+// net+refine's third start (RegistrationOptions::search_scene_start) on simulated scans ten
+// frames apart whose motion (10 m and more) neither the network's start nor the identity's
+// pulls in: with the searched start the answers reach (1 deg, 0.3 m) and are valid; without it
+// they do not.
+TEST(RegistrarSecondStartTest, SearchedStartRescuesMotionsOfTenMetres) {
+  LidarStreamOptions stream;
+  stream.frame_offset = 10;
+  stream.pairs_per_sequence = 8;
+  stream.stream_seed = DeriveSeed(11, 1010);
+  const RegistrationPairGenerator pairs = MakeLidarPairStream(stream);
+  for (int index : {27, 28, 39, 47}) {
+    auto pair = pairs(index);
+    ASSERT_TRUE(pair.ok()) << pair.status();
+    const Octree source = TreeOf(pair->source, 9);
+    const Octree target = TreeOf(pair->target, 9);
+    RegistrationOptions without;
+    without.search_scene_start = false;
+    auto a = SharedRegistrar().Register(source, target, without);
+    auto b = SharedRegistrar().Register(source, target);
+    ASSERT_TRUE(a.ok() && b.ok());
+    const PairError ea = ErrorOf(a->T_target_source, pair->T_target_source);
+    const PairError eb = ErrorOf(b->T_target_source, pair->T_target_source);
+    EXPECT_FALSE(ea.rotation_deg < 1.0 && ea.translation < 0.3)
+        << "pair " << index << " no longer needs the search; pick another";
+    EXPECT_LT(eb.rotation_deg, 1.0) << "pair " << index;
+    EXPECT_LT(eb.translation, 0.3) << "pair " << index;
+    EXPECT_TRUE(b->valid) << "pair " << index << ": " << b->failure_reason;
+    EXPECT_GT(b->confidence, a->confidence) << "pair " << index;
+  }
 }
 
 }  // namespace
