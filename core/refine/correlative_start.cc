@@ -50,13 +50,14 @@ absl::StatusOr<CorrelativeStart> FindCorrelativeStart(const Octree& source, cons
     return absl::InvalidArgumentError("FindCorrelativeStart: the initial guess is not finite");
   }
   const int deepest = std::min(source.max_depth(), target.max_depth());
-  const int depth = options.depth < 0 ? std::max(1, deepest - 3) : options.depth;
-  if (depth > deepest || depth > 10 || options.max_shift_cells < 0 || !(options.max_yaw_deg >= 0) ||
-      options.max_source_nodes <= 0) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "FindCorrelativeStart: depth ", depth, " must be within the trees (", deepest,
-        ") and at most 10; max_shift_cells and max_yaw_deg non-negative, max_source_nodes "
-        "positive"));
+  const int depth =
+      options.depth < 0 ? std::clamp(deepest - 3, 1, kMaxCorrelativeDepth) : options.depth;
+  if (depth < 1 || depth > deepest || depth > kMaxCorrelativeDepth || options.max_shift_cells < 0 ||
+      !(options.max_yaw_deg >= 0) || options.max_source_nodes <= 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("FindCorrelativeStart: depth ", depth, " must be within the trees (1..",
+                     deepest, ") and at most ", kMaxCorrelativeDepth,
+                     "; max_shift_cells and max_yaw_deg non-negative, max_source_nodes positive"));
   }
   const Occupancy occupied(target, depth);
   const double cells = static_cast<double>(int64_t{1} << depth);

@@ -21,10 +21,14 @@
 
 namespace rpsr::core {
 
+// The occupancy bitset holds 2^(3 depth) bits: 2 MB at depth 8, 128 MB at depth 10, so deeper
+// trees (a server may allow depth 21) are searched at depth 8 at most.
+inline constexpr int kMaxCorrelativeDepth = 8;
+
 struct CorrelativeSearchOptions {
-  // Occupancy depth; < 0: three above the deepest depth both trees hold (at least 1): 3.75 m
-  // cells on a 240 m LiDAR cube, fine enough for a start that the refinement's first stage
-  // (7.5 m cells) pulls in.
+  // Occupancy depth, 1..kMaxCorrelativeDepth; < 0: three above the deepest depth both trees
+  // hold, within that range: 3.75 m cells on a 240 m LiDAR cube, fine enough for a start that
+  // the refinement's first stage (7.5 m cells) pulls in.
   int depth = -1;
   // Yaw candidates within +-max_yaw_deg of the initial guess, spaced so that the source's nodes
   // at their RMS distance from the pivot move about half a cell per step.
@@ -46,7 +50,7 @@ struct CorrelativeStart {
 };
 
 // InvalidArgument for empty trees, a non-finite initial guess or options out of range (depth
-// beyond the trees, negative counts or angles).
+// beyond the trees or kMaxCorrelativeDepth, negative counts or angles).
 absl::StatusOr<CorrelativeStart> FindCorrelativeStart(
     const Octree& source, const Octree& target, const Eigen::Isometry3d& initial_T_target_source,
     const CorrelativeSearchOptions& options = {});

@@ -80,7 +80,7 @@ TEST(CorrelativeStartTest, RejectsBadInputs) {
   EXPECT_THAT(FindCorrelativeStart(source, target, nan).status().message(),
               HasSubstr("not finite"));
   CorrelativeSearchOptions too_deep;
-  too_deep.depth = 12;
+  too_deep.depth = kMaxCorrelativeDepth + 1;  // within the trees (depth 9), beyond the bitset's cap
   EXPECT_EQ(
       FindCorrelativeStart(source, target, Eigen::Isometry3d::Identity(), too_deep).status().code(),
       absl::StatusCode::kInvalidArgument);
