@@ -80,7 +80,9 @@ absl::StatusOr<CorrelativeStart> FindCorrelativeStart(const Octree& source, cons
   for (const Eigen::Vector3d& p : moved) mean_r2 += (p - pivot).head<2>().squaredNorm();
   const double rms_r = std::sqrt(mean_r2 / static_cast<double>(used));
   const double max_yaw = options.max_yaw_deg * M_PI / 180.0;
-  const double yaw_step = rms_r > 0 ? 0.5 * edge / rms_r : max_yaw + 1.0;
+  // At most 20 steps each way (a cloud wide against its cells would otherwise ask for hundreds:
+  // the search's time is bounded whatever the input).
+  const double yaw_step = rms_r > 0 ? std::max(0.5 * edge / rms_r, max_yaw / 20.0) : max_yaw + 1.0;
   const int yaw_half_steps = yaw_step > 0 ? static_cast<int>(std::floor(max_yaw / yaw_step)) : 0;
   const int shift = options.max_shift_cells;
 

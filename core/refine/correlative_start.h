@@ -31,7 +31,7 @@ struct CorrelativeSearchOptions {
   // the refinement's first stage (7.5 m cells) pulls in.
   int depth = -1;
   // Yaw candidates within +-max_yaw_deg of the initial guess, spaced so that the source's nodes
-  // at their RMS distance from the pivot move about half a cell per step.
+  // at their RMS distance from the pivot move about half a cell per step (at most 41 angles).
   double max_yaw_deg = 20.0;
   // Shifts of -max_shift_cells..max_shift_cells whole cells in x and y (+-22.5 m at 3.75 m).
   int max_shift_cells = 6;
