@@ -204,6 +204,12 @@ absl::StatusOr<std::vector<Step>> RunLocally(const std::vector<std::string>& fra
                  nullptr, absl::GetFlag(FLAGS_constant_velocity));
   core::BarnesHutTreeOptions tree_options;
   tree_options.max_depth = depth;
+  absl::StatusOr<core::RegistrationMode> parsed_mode = core::ParseRegistrationMode(mode);
+  if (!parsed_mode.ok()) return parsed_mode.status();
+  core::RegistrationOptions options;
+  options.mode = *parsed_mode;
+  options.passes = absl::GetFlag(FLAGS_passes);
+  const bool constant_velocity = absl::GetFlag(FLAGS_constant_velocity);
   FrameProgress progress(static_cast<int>(frames.size()));
   for (size_t i = 1; i < frames.size(); ++i) {
     absl::StatusOr<core::PointCloud> current = reader.Next(i);
@@ -220,10 +226,7 @@ absl::StatusOr<std::vector<Step>> RunLocally(const std::vector<std::string>& fra
       return absl::Status(tree.status().code(),
                           absl::StrCat(frames[i], ": ", tree.status().message()));
     }
-    core::RegistrationOptions options;
-    options.mode = *core::ParseRegistrationMode(mode);
-    options.passes = absl::GetFlag(FLAGS_passes);
-    if (absl::GetFlag(FLAGS_constant_velocity)) options.initial_T_target_source = motion;
+    if (constant_velocity) options.initial_T_target_source = motion;
     absl::StatusOr<core::RegistrationResult> result =
         (*registrar)->Register(*tree, *previous_tree, options);
     if (!result.ok()) {

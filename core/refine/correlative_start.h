@@ -42,7 +42,8 @@ struct CorrelativeSearchOptions {
 struct CorrelativeStart {
   Eigen::Isometry3d T_target_source = Eigen::Isometry3d::Identity();
   // Fraction of the scored source nodes that land in occupied target cells: at the best
-  // candidate and at the initial guess.
+  // candidate and at the initial guess. Ties go to the candidate nearest the initial guess, so
+  // score == initial_score means the best candidate IS the initial guess.
   double score = 0.0;
   double initial_score = 0.0;
   int candidates = 0;

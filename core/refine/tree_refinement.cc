@@ -122,6 +122,7 @@ double EdgeOf(const Octree& tree, int depth) {
   return 2.0 * tree.half_length() / static_cast<double>(uint64_t{1} << depth);
 }
 
+// Fills a new (empty) side.
 void PrepareSourceDepth(const Octree& source, int depth, const TreeRefinementOptions& options,
                         SourceDepth& side) {
   side.depth = depth;
@@ -133,10 +134,6 @@ void PrepareSourceDepth(const Octree& source, int depth, const TreeRefinementOpt
   const Octree::Level& s = source.level(depth);
   const size_t n = s.size();
   const size_t used = std::min(n, static_cast<size_t>(options.max_source_nodes_per_depth));
-  side.nodes.clear();
-  side.mean.clear();
-  side.regularized.clear();
-  side.prior.clear();
   side.nodes.reserve(used);
   for (size_t k = 0; k < used; ++k) {
     // Even stride over the Morton order: spatially spread, deterministic.
@@ -162,6 +159,7 @@ void PrepareSourceDepth(const Octree& source, int depth, const TreeRefinementOpt
   }
 }
 
+// Fills a new (empty) side.
 void PrepareTargetDepth(const Octree& target, int depth, const TreeRefinementOptions& options,
                         TargetDepth& side) {
   side.depth = depth;
@@ -169,7 +167,6 @@ void PrepareTargetDepth(const Octree& target, int depth, const TreeRefinementOpt
   side.min_count = options.min_count_for_covariance;
   side.edge = EdgeOf(target, depth);
   const Octree::Level& t = target.level(depth);
-  side.index.clear();
   side.index.reserve(t.size());
   for (size_t j = 0; j < t.size(); ++j) {
     side.index.emplace(t.morton[j], static_cast<int32_t>(j));

@@ -30,9 +30,9 @@
 //    weakly constrained directions (a laptop's hinge, a spring's axis), which the finer stages
 //    could not undo (refined from the truth, 15 of 100 unseen clean object pairs ended beyond
 //    (1 deg, 0.01)). From network-sized errors under jitter 0.03, 24 of 60 unseen pairs fail on
-//    the source's own cells, 14 re-binned (tree_refinement_test). Unseen objects, net+refine, 100
-//    pairs: clean rotation RMSE 18.4 -> 1.5 deg, recall (1 deg, 0.01) over the 21 study settings
-//    0.659 -> 0.713 (README).
+//    the source's own cells, 14 re-binned (tree_refinement_test). Unseen objects, net+refine (three
+//    network passes then), 100 pairs: clean rotation RMSE 18.4 -> 1.5 deg, recall (1 deg, 0.01)
+//    over the 21 study settings 0.659 -> 0.713.
 //  - Levenberg-Marquardt step control at the finest depth (step_control).
 //  - Reproducibility: deterministic for a given start; re-binning is discontinuous in the pose,
 //    so starts 1e-6 apart (the network's batching tolerance) can end slightly apart: on 100
@@ -179,8 +179,10 @@ struct DepthStage {
   // centroid (metres); 0 when the stage made none.
   double last_update_rotation_rad = 0.0;
   double last_update_translation = 0.0;
-  double seconds = 0.0;          // the whole stage, preparation included
-  double prepare_seconds = 0.0;  // regularising source nodes, indexing the target level
+  double seconds = 0.0;  // the whole stage, preparation included
+  // Re-binning, regularising the source's nodes, indexing the target's level (near 0 where a
+  // TreeRefinementCache already held the last two).
+  double prepare_seconds = 0.0;
 };
 
 struct TreeRefinementResult {

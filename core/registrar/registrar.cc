@@ -60,10 +60,11 @@ absl::StatusOr<TreeRefinementResult> RefineWithFallback(const Octree& source, co
   return Better(*second, *first) ? second : first;
 }
 
-// The initial guess's result replaces the network's only when it is clearly better: valid where
-// the other is not, or one more percent of the source overlapping. On objects with a
-// translational or rotational symmetry both starts reach equally good fits in different poses,
-// and the network's start, which saw the shapes, is the better prior there.
+// A later start's result (the initial guess's, the searched one's) replaces the answer so far only
+// when it is clearly better: valid where the other is not, or one more percent of the source
+// overlapping. On objects with a translational or rotational symmetry both starts reach equally
+// good fits in different poses, and the network's start, which saw the shapes, is the better
+// prior there.
 bool ClearlyBetter(const TreeRefinementResult& a, const TreeRefinementResult& b) {
   if (a.valid != b.valid) return a.valid;
   return a.valid && a.fitness > b.fitness + 0.01;
@@ -319,31 +320,33 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
     return result;
   }
   settle(*refined, from, result);
-  const TreeRefinementResult* best = &*refined;  // the answer settled so far
-  std::optional<TreeRefinementResult> best_storage;
-  // The second start (RegistrationOptions::also_refine_from_initial) runs only when the first
-  // answer is not already confident.
-  if (options.mode == RegistrationMode::kNetRefine && options.also_refine_from_initial &&
-      result.confidence < kConfidentEnough && !NearlyEqual(from, initial, target)) {
-    absl::StatusOr<TreeRefinementResult> from_initial =
-        RefineWithFallback(source, target, initial, refinement, cache);
-    if (from_initial.ok() && ClearlyBetter(*from_initial, *best)) {
-      settle(*from_initial, initial, result);
-      best_storage = *std::move(from_initial);
-      best = &*best_storage;
+  TreeRefinementResult best = *std::move(refined);  // the answer settled so far
+  // A further start: refined, and settled when clearly better than the answer so far.
+  auto try_start = [&](const Eigen::Isometry3d& start_pose) {
+    absl::StatusOr<TreeRefinementResult> r =
+        RefineWithFallback(source, target, start_pose, refinement, cache);
+    if (r.ok() && ClearlyBetter(*r, best)) {
+      settle(*r, start_pose, result);
+      best = *std::move(r);
     }
+  };
+  // The second start (RegistrationOptions::also_refine_from_initial) runs only when the first
+  // answer is not already confident, and not when it would start where the first did.
+  const bool net_refine = options.mode == RegistrationMode::kNetRefine;
+  bool refined_from_initial = false;
+  if (net_refine && options.also_refine_from_initial && result.confidence < kConfidentEnough &&
+      !NearlyEqual(from, initial, target)) {
+    try_start(initial);
+    refined_from_initial = true;
   }
   // The third start (RegistrationOptions::search_scene_start): scene-scale trees whose answer is
-  // still not confident.
-  if (options.mode == RegistrationMode::kNetRefine && options.search_scene_start &&
-      result.confidence < kConfidentEnough && IsDeepPair(source, target, refinement)) {
+  // still not confident. A search whose best candidate is the initial guess itself (no candidate
+  // scored higher; ties go to it) would only repeat the second start when that one ran.
+  if (net_refine && options.search_scene_start && result.confidence < kConfidentEnough &&
+      IsDeepPair(source, target, refinement)) {
     absl::StatusOr<CorrelativeStart> searched = FindCorrelativeStart(source, target, initial);
-    if (searched.ok()) {
-      absl::StatusOr<TreeRefinementResult> from_search =
-          RefineWithFallback(source, target, searched->T_target_source, refinement, cache);
-      if (from_search.ok() && ClearlyBetter(*from_search, *best)) {
-        settle(*from_search, searched->T_target_source, result);
-      }
+    if (searched.ok() && (searched->score > searched->initial_score || !refined_from_initial)) {
+      try_start(searched->T_target_source);
     }
   }
   result.timings.refine_seconds = SecondsSince(refine_start) - confidence_seconds;
