@@ -15,6 +15,7 @@
 #include "absl/synchronization/mutex.h"
 #include "absl/synchronization/notification.h"
 #include "core/io/file_bytes.h"
+#include "core/net/blas_info.h"
 #include "grpcpp/ext/proto_server_reflection_plugin.h"
 #include "grpcpp/grpcpp.h"
 #include "grpcpp/health_check_service_interface.h"
@@ -292,6 +293,7 @@ class ServerState {
     if (options_.log_requests) {
       LogEvent("info", "model_loaded",
                {{"model", description},
+                {"blas", core::net::BlasDescription()},
                 {"seconds", absl::StrCat(absl::ToDoubleSeconds(absl::Now() - start))}});
     }
     return absl::OkStatus();

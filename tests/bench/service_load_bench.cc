@@ -38,6 +38,7 @@
 #include "absl/time/clock.h"
 #include "absl/time/time.h"
 #include "core/data/object_pairs.h"
+#include "core/net/blas_info.h"
 #include "core/net/rpsr_net.h"
 #include "core/registrar/registrar.h"
 #include "core/tree/bh_tree.h"
@@ -577,6 +578,7 @@ int Main() {
               shared_registrar->model_description().c_str(), absl::GetFlag(FLAGS_mode).c_str(),
               absl::GetFlag(FLAGS_pairs), absl::GetFlag(FLAGS_points), absl::GetFlag(FLAGS_workers),
               std::thread::hardware_concurrency());
+  std::printf("blas: %s\n", core::net::BlasDescription().c_str());
   PrintHeader();
   std::vector<Row> rows;
   if (part == "inproc" || part == "all") RunInProcess(*shared_registrar, objects, &rows);
