@@ -103,6 +103,8 @@ RegistrationResult FromProto(const rpsr::v1::RegistrationResult& in) {
   out.num_degenerate = in.num_degenerate();
   out.net_T_target_source = FromProto(in.net_transform_target_source());
   out.net_score_peak = in.net_score_peak();
+  out.start = in.start();
+  out.starts = static_cast<int>(in.starts());
   out.mode = in.mode();
   const rpsr::v1::Timings& t = in.timings();
   out.timings = {t.queue_seconds(),  t.tree_seconds(),       t.net_seconds(),
@@ -117,6 +119,8 @@ void ToProto(const RegisterOptions& in, rpsr::v1::RegisterOptions* out) {
   if (in.initial_T_target_source)
     ToProto(*in.initial_T_target_source, out->mutable_initial_guess());
   out->set_deadline_seconds(absl::ToDoubleSeconds(in.server_deadline));
+  out->set_refine_from_initial(in.refine_from_initial);
+  out->set_search_scene_start(in.search_scene_start);
 }
 
 double SecondsSince(std::chrono::steady_clock::time_point start) {

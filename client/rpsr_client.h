@@ -142,6 +142,10 @@ struct RegisterOptions {
   std::optional<Eigen::Isometry3d> initial_T_target_source;
   // Server-side time budget (queued requests past it are dropped unrun); zero: none.
   absl::Duration server_deadline = absl::ZeroDuration();
+  // net+refine's later starts (proto RegisterOptions): refine from the initial guess too when
+  // the network's start is not confident; search a start about z on scene-scale trees.
+  bool refine_from_initial = true;
+  bool search_scene_start = true;
   // The gRPC deadline of this call; zero: ClientOptions::default_deadline.
   absl::Duration timeout = absl::ZeroDuration();
 };
@@ -175,6 +179,10 @@ struct RegistrationResult {
   Eigen::Isometry3d net_T_target_source = Eigen::Isometry3d::Identity();
   double net_score_peak = 0.0;
   std::string mode;
+  // Where the returned pose's refinement started ("network", "initial", "searched") and how many
+  // starts the server refined for this pair (proto RegistrationResult.start, .starts).
+  std::string start;
+  int starts = 0;
   ServerTimings timings;
   // Client side: from the first attempt's start to the answer (retries and re-uploads included).
   double round_trip_seconds = 0.0;

@@ -94,11 +94,16 @@ absl::StatusOr<core::RegistrationOptions> OptionsFromProto(const v1::RegisterOpt
                                                    proto.deadline_seconds(),
                                                    "; a finite number >= 0 expected"));
   }
+  if (proto.has_refine_from_initial())
+    options.also_refine_from_initial = proto.refine_from_initial();
+  if (proto.has_search_scene_start()) options.search_scene_start = proto.search_scene_start();
   return options;
 }
 
 void ResultToProto(const core::RegistrationResult& result, v1::RegistrationResult* proto) {
   TransformToProto(result.T_target_source, proto->mutable_transform_target_source());
+  proto->set_start(result.start);
+  proto->set_starts(static_cast<uint32_t>(result.starts));
   proto->set_valid(result.valid);
   proto->set_failure_reason(result.failure_reason);
   proto->set_confidence(result.confidence);

@@ -5,6 +5,7 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <exception>
 #include <thread>
@@ -196,6 +197,7 @@ class ServerState {
                {{"address", options_.address},
                 {"port", absl::StrCat(port_)},
                 {"metrics_port", absl::StrCat(metrics_port_)},
+                {"workers", absl::StrCat(options_.batching.workers)},
                 {"tls", options_.tls_cert_file.empty() ? "off" : "on"},
                 {"auth", options_.auth_tokens.empty() ? "off" : "bearer"},
                 {"raised_thread_stacks", absl::StrCat(RaisedThreadStackRequests())}});
@@ -327,7 +329,11 @@ void RunningServer::Wait() { state_->Wait(); }
 bool RunningServer::ready() const { return state_->ready(); }
 absl::Status RunningServer::WaitForModel() { return state_->WaitForModel(); }
 
-absl::StatusOr<std::unique_ptr<RunningServer>> StartServer(const ServerOptions& options) {
+absl::StatusOr<std::unique_ptr<RunningServer>> StartServer(const ServerOptions& given) {
+  ServerOptions options = given;
+  if (options.batching.workers == 0) {
+    options.batching.workers = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  }
   absl::Status valid = ValidateOptions(options);
   if (!valid.ok()) return valid;
   auto state = std::make_unique<ServerState>(options);

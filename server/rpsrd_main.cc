@@ -54,7 +54,8 @@ ABSL_FLAG(absl::Duration, max_queue_delay, kBatching.max_queue_delay,
           "Longest a registration waits for companions");
 ABSL_FLAG(int, max_queue, kBatching.max_queue,
           "Registrations waiting at most; more are answered RESOURCE_EXHAUSTED");
-ABSL_FLAG(int, workers, kBatching.workers, "Concurrent batches (worker threads)");
+ABSL_FLAG(int, workers, kBatching.workers,
+          "Concurrent batches (worker threads); 0: one per hardware thread");
 ABSL_FLAG(int, intra_op_threads, kBatching.intra_op_threads, "LibTorch threads per worker");
 ABSL_FLAG(uint64_t, max_points_per_cloud, kDefaults.max_points_per_cloud,
           "Most points in one uploaded cloud or Track frame");

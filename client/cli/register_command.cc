@@ -73,6 +73,8 @@ absl::StatusOr<PairReport> RegisterOnServer(const core::PointCloud& source,
   RegisterOptions register_options;
   register_options.mode = ChooseMode(source, target, requested_mode, info->model_name, nullptr);
   register_options.passes = absl::GetFlag(FLAGS_passes);
+  register_options.refine_from_initial = absl::GetFlag(FLAGS_refine_from_initial);
+  register_options.search_scene_start = absl::GetFlag(FLAGS_search_scene_start);
   absl::StatusOr<RegistrationResult> result =
       (*session)->Register(source.points, target.points, register_options);
   if (!result.ok()) return result.status();
@@ -124,6 +126,8 @@ int RunRegisterCommand(const std::vector<std::string>& args) {
     core::RegistrationOptions options;
     options.mode = *core::ParseRegistrationMode(mode);
     options.passes = absl::GetFlag(FLAGS_passes);
+    options.also_refine_from_initial = absl::GetFlag(FLAGS_refine_from_initial);
+    options.search_scene_start = absl::GetFlag(FLAGS_search_scene_start);
     report = RegisterWithRegistrar(**registrar, *source, *target, tree_depth, options);
   }
   if (!report.ok()) return Fail(kFailure, std::string(report.status().message()));

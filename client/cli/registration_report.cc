@@ -37,6 +37,8 @@ PairReport ReportOf(const core::RegistrationResult& result, double seconds) {
   report.inlier_rmse = result.inlier_rmse;
   report.iterations = result.iterations;
   report.mode = std::string(core::RegistrationModeName(result.mode));
+  report.start = result.start;
+  report.starts = result.starts;
   report.seconds = seconds;
   return report;
 }
@@ -52,6 +54,8 @@ PairReport ReportOf(const RegistrationResult& result) {
   report.inlier_rmse = result.inlier_rmse;
   report.iterations = result.iterations;
   report.mode = result.mode;
+  report.start = result.start;
+  report.starts = result.starts;
   report.seconds = result.round_trip_seconds;
   return report;
 }
@@ -103,9 +107,10 @@ std::string FormatReportText(const PairReport& report) {
                         q.y(), q.z());
   absl::StrAppendFormat(&out,
                         "valid %s, confidence %.3f, fitness %.3f, inlier RMSE %.4g, %d "
-                        "iterations, mode %s, %.1f ms\n",
+                        "iterations, mode %s, %s start of %d tried, %.1f ms\n",
                         report.valid ? "yes" : "no", report.confidence, report.fitness,
-                        report.inlier_rmse, report.iterations, report.mode, 1e3 * report.seconds);
+                        report.inlier_rmse, report.iterations, report.mode, report.start,
+                        report.starts, 1e3 * report.seconds);
   if (!report.valid && !report.failure_reason.empty()) {
     absl::StrAppend(&out, "reason: ", report.failure_reason, "\n");
   }
@@ -131,6 +136,7 @@ std::string FormatReportJson(const PairReport& report) {
       ", \"fitness\": ", absl::StrFormat("%.9g", report.fitness),
       ", \"inlier_rmse\": ", absl::StrFormat("%.9g", report.inlier_rmse),
       ", \"iterations\": ", report.iterations, ", \"mode\": ", JsonString(report.mode),
+      ", \"start\": ", JsonString(report.start), ", \"starts\": ", report.starts,
       ", \"seconds\": ", absl::StrFormat("%.6f", report.seconds));
   if (report.truth) {
     const core::PairError error = core::ErrorOf(report.T_target_source, *report.truth);

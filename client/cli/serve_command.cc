@@ -18,7 +18,8 @@ ABSL_FLAG(std::string, address, "0.0.0.0:50051",
 ABSL_FLAG(std::string, metrics_address, "",
           "serve: Prometheus /metrics address host:port; empty: none");
 ABSL_FLAG(int, max_batch, 16, "serve: registrations per batched forward pass");
-ABSL_FLAG(int, workers, 1, "serve: concurrent batches (worker threads)");
+ABSL_FLAG(int, workers, 0,
+          "serve: concurrent batches (worker threads); 0: one per hardware thread");
 
 namespace rpsr::client {
 

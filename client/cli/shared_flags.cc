@@ -41,6 +41,14 @@ ABSL_FLAG(int, passes, 0,
           "network passes (Sec. 3.3); 0: 3 for train; elsewhere the mode's default: the "
           "model's own number for net, 2 for net+refine");
 ABSL_FLAG(int, threads, 1, "LibTorch intra-op threads");
+ABSL_FLAG(bool, refine_from_initial, true,
+          "eval, register, odometry, net+refine: when the answer refined from the network's "
+          "estimate is below 0.9 confidence, refine from the initial guess (or identity) too and "
+          "keep the clearly better answer");
+ABSL_FLAG(bool, search_scene_start, true,
+          "eval, register, odometry, net+refine on scene-scale trees: when the answer is still "
+          "below 0.9 confidence, search a start (turns about z, assumed up; shifts of whole "
+          "cells) and refine from it too");
 ABSL_FLAG(std::string, model, "",
           "eval, calibrate: a weights file (.rpsrw) or the name of a model embedded in the binary "
           "(objects; lidar when shipped); default: the embedded object model");

@@ -320,13 +320,17 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
     return result;
   }
   settle(*refined, from, result);
+  result.start = options.mode == RegistrationMode::kRefine ? "initial" : "network";
+  result.starts = 1;
   TreeRefinementResult best = *std::move(refined);  // the answer settled so far
   // A further start: refined, and settled when clearly better than the answer so far.
-  auto try_start = [&](const Eigen::Isometry3d& start_pose) {
+  auto try_start = [&](const Eigen::Isometry3d& start_pose, const char* name) {
     absl::StatusOr<TreeRefinementResult> r =
         RefineWithFallback(source, target, start_pose, refinement, cache);
+    ++result.starts;
     if (r.ok() && ClearlyBetter(*r, best)) {
       settle(*r, start_pose, result);
+      result.start = name;
       best = *std::move(r);
     }
   };
@@ -336,7 +340,7 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   bool refined_from_initial = false;
   if (net_refine && options.also_refine_from_initial && result.confidence < kConfidentEnough &&
       !NearlyEqual(from, initial, target)) {
-    try_start(initial);
+    try_start(initial, "initial");
     refined_from_initial = true;
   }
   // The third start (RegistrationOptions::search_scene_start): scene-scale trees whose answer is
@@ -346,7 +350,7 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
       IsDeepPair(source, target, refinement)) {
     absl::StatusOr<CorrelativeStart> searched = FindCorrelativeStart(source, target, initial);
     if (searched.ok() && (searched->score > searched->initial_score || !refined_from_initial)) {
-      try_start(searched->T_target_source);
+      try_start(searched->T_target_source, "searched");
     }
   }
   result.timings.refine_seconds = SecondsSince(refine_start) - confidence_seconds;

@@ -113,6 +113,13 @@ struct RegistrationResult {
   Eigen::Isometry3d net_T_target_source = Eigen::Isometry3d::Identity();
   double net_score_peak = 0.0;
   RegistrationMode mode = RegistrationMode::kNetRefine;
+  // Where the returned pose's refinement started: "network" (net+refine's first start; mode net's
+  // single evaluation), "initial" (the caller's guess or identity: mode refine's only start,
+  // net+refine's second) or "searched" (net+refine's third, RegistrationOptions::
+  // search_scene_start); and how many starts were refined for this pair (1-3; 0 when the pipeline
+  // stopped before refining: the network's output not finite).
+  std::string start = "network";
+  int starts = 0;
   RegistrationTimings timings;
   // The confidence model's inputs, in the order of confidence_model.h's ConfidenceFeatureNames()
   // (what `rpsr calibrate` fits on; for diagnosis too). Empty when the pipeline stopped before

@@ -153,6 +153,23 @@ TEST_F(RpsrClientTest, UploadsInChunksAndRegistersByIds) {
   EXPECT_GT(result->confidence, 0.0);
   EXPECT_GT(result->round_trip_seconds, 0.0);
   EXPECT_GE(result->timings.batch_size, 1u);
+  EXPECT_GE(result->starts, 1);
+  EXPECT_TRUE(result->start == "network" || result->start == "initial") << result->start;
+  // The later starts' switches reach the server: with both off, one start, the network's.
+  RegisterOptions first_start_only;
+  first_start_only.refine_from_initial = false;
+  first_start_only.search_scene_start = false;
+  absl::StatusOr<RegistrationResult> alone =
+      (*session)->Register(source->cloud_id, target->cloud_id, first_start_only);
+  ASSERT_TRUE(alone.ok()) << alone.status();
+  EXPECT_EQ(alone->start, "network");
+  EXPECT_EQ(alone->starts, 1);
+  RegisterOptions refine;
+  refine.mode = "refine";
+  absl::StatusOr<RegistrationResult> refined =
+      (*session)->Register(source->cloud_id, target->cloud_id, refine);
+  ASSERT_TRUE(refined.ok()) << refined.status();
+  EXPECT_EQ(refined->start, "initial");
   EXPECT_TRUE((*session)->Release(source->cloud_id).ok());
   // Released: the library refuses the id before asking the server.
   EXPECT_EQ((*session)->Register(source->cloud_id, target->cloud_id).status().code(),

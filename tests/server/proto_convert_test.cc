@@ -63,6 +63,26 @@ TEST(ProtoConvertTest, OptionsDefaultToNetRefineAndCheckRanges) {
   EXPECT_EQ(OptionsFromProto(proto).status().code(), absl::StatusCode::kInvalidArgument);
 }
 
+// The later starts are on unless a client says otherwise (proto3 optional: absent is not false).
+TEST(ProtoConvertTest, LaterStartsAreOnUnlessTurnedOff) {
+  auto options = OptionsFromProto({});
+  ASSERT_TRUE(options.ok());
+  EXPECT_TRUE(options->also_refine_from_initial);
+  EXPECT_TRUE(options->search_scene_start);
+  v1::RegisterOptions proto;
+  proto.set_search_scene_start(false);
+  options = OptionsFromProto(proto);
+  ASSERT_TRUE(options.ok());
+  EXPECT_TRUE(options->also_refine_from_initial);
+  EXPECT_FALSE(options->search_scene_start);
+  proto.set_refine_from_initial(false);
+  proto.set_search_scene_start(true);
+  options = OptionsFromProto(proto);
+  ASSERT_TRUE(options.ok());
+  EXPECT_FALSE(options->also_refine_from_initial);
+  EXPECT_TRUE(options->search_scene_start);
+}
+
 TEST(ProtoConvertTest, ResultCarriesEverythingTheRegistrarSays) {
   core::RegistrationResult result;
   result.valid = false;
@@ -72,6 +92,8 @@ TEST(ProtoConvertTest, ResultCarriesEverythingTheRegistrarSays) {
   result.num_degenerate = 1;
   result.mode = core::RegistrationMode::kRefine;
   result.timings.refine_seconds = 0.004;
+  result.start = "searched";
+  result.starts = 3;
   v1::RegistrationResult proto;
   ResultToProto(result, &proto);
   EXPECT_FALSE(proto.valid());
@@ -82,6 +104,8 @@ TEST(ProtoConvertTest, ResultCarriesEverythingTheRegistrarSays) {
   EXPECT_TRUE(proto.degenerate_axes(3));
   EXPECT_EQ(proto.mode(), "refine");
   EXPECT_EQ(proto.timings().refine_seconds(), 0.004);
+  EXPECT_EQ(proto.start(), "searched");
+  EXPECT_EQ(proto.starts(), 3u);
 }
 
 TEST(ProtoConvertTest, StatusCodesAndMessagesPassThrough) {

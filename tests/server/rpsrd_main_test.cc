@@ -5,6 +5,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <string>
 #include <thread>
@@ -59,7 +60,13 @@ TEST(RpsrdTest, ServesAndDrainsOnSigterm) {
   const std::string listening = read_until("listening");
   int port = 0;
   ASSERT_TRUE(absl::SimpleAtoi(Field(listening, "port"), &port)) << log;
-  EXPECT_THAT(read_until("model_loaded"), HasSubstr("RPSRNet"));
+  // No --workers: one per hardware thread, said in the log and in ServerInfo.
+  const uint32_t hardware_threads = std::max(1u, std::thread::hardware_concurrency());
+  EXPECT_EQ(Field(listening, "workers"), absl::StrCat(hardware_threads)) << listening;
+  const std::string loaded = read_until("model_loaded");
+  EXPECT_THAT(loaded, HasSubstr("RPSRNet"));
+  // The BLAS kernels decide the network's speed: the log names them (DEPS.md installs OpenBLAS).
+  EXPECT_THAT(loaded, HasSubstr("blas=\"OpenBLAS ")) << loaded;
 
   testing::ServiceTestClient client(absl::StrCat("127.0.0.1:", port));
   EXPECT_EQ(client.HealthStatus(""), 1);
@@ -69,6 +76,7 @@ TEST(RpsrdTest, ServesAndDrainsOnSigterm) {
   ASSERT_TRUE(client.stub().GetServerInfo(&context, {}, &info).ok());
   EXPECT_EQ(info.limits().max_batch(), 4u);
   EXPECT_EQ(info.limits().max_points_per_cloud(), 5000u);
+  EXPECT_EQ(info.limits().workers(), hardware_threads);
 
   ASSERT_EQ(kill(pid, SIGTERM), 0);
   EXPECT_THAT(read_until("stopped"), HasSubstr("level=info"));

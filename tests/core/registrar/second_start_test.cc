@@ -50,6 +50,15 @@ TEST(RegistrarSecondStartTest, KeepsTheBetterOfTheNetworksStartAndTheGuess) {
     const bool is_a = both->T_target_source.isApprox(a->T_target_source, 1e-9);
     const bool is_b = both->T_target_source.isApprox(b->T_target_source, 1e-9);
     ASSERT_TRUE(is_a || is_b) << "frame " << first << ": neither start's answer";
+    // The result says which start it came from and how many ran.
+    EXPECT_EQ(a->start, "network");
+    EXPECT_EQ(a->starts, 1);
+    EXPECT_EQ(b->start, "initial");
+    EXPECT_EQ(b->starts, 1);
+    EXPECT_EQ(both->start, is_a ? "network" : "initial") << "frame " << first;
+    // A confident first answer is kept alone; the second start ran where the answer is its own.
+    if (a->confidence >= 0.9) EXPECT_EQ(both->starts, 1) << "frame " << first;
+    if (!is_a) EXPECT_EQ(both->starts, 2) << "frame " << first;
     if (!is_a) {
       ++from_guess;
       EXPECT_LT(a->confidence, 0.9) << "a confident first answer is kept, frame " << first;
@@ -96,6 +105,9 @@ TEST(RegistrarSecondStartTest, SearchedStartRescuesMotionsOfTenMetres) {
     EXPECT_LT(eb.translation, 0.3) << "pair " << index;
     EXPECT_TRUE(b->valid) << "pair " << index << ": " << b->failure_reason;
     EXPECT_GT(b->confidence, a->confidence) << "pair " << index;
+    EXPECT_EQ(b->start, "searched") << "pair " << index;
+    EXPECT_EQ(b->starts, a->starts + 1) << "pair " << index;
+    EXPECT_NE(a->start, "searched") << "pair " << index;
   }
 }
 
