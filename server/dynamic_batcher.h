@@ -23,6 +23,14 @@
 // - Stop() either drains (runs everything queued, without waiting for companions) or rejects what
 //   is queued with UNAVAILABLE; either way batches already running finish, and every accepted
 //   request is answered exactly once before Stop returns.
+// - Not Triton's: a due batch is shared among the idle workers. A worker that finds n requests
+//   due and k workers idle (itself included) takes ceil(n / k) of them (at most max_batch), and the
+//   rest are due at once for the next idle worker, so no worker waits idle while another runs
+//   requests it could have run. This is for bursts (a fleet's synchronised 10 Hz frames): 16
+//   requests arriving together on 2 idle workers run as two batches of 8 at once instead of one
+//   of 16, which on a CPU (where a batch costs what its requests cost one by one) halves their
+//   latency. In the closed-loop load benchmark (16 clients, 2 workers) it changed nothing beyond
+//   noise: there requests arrive one by one and the batches form behind busy workers.
 // Not taken from Triton: preferred batch sizes, priorities, and per-request queue policies.
 //
 // Completion: a callback, called exactly once on a worker's thread (or on Stop's or an Enqueue's
@@ -326,16 +334,23 @@ class DynamicBatcher {
           now = absl::Now();
           DropStaleFrontLocked(now, &dropped);
           if (queue_.empty()) {
+            split_due_ = false;
             if (!dropped.empty()) break;  // answer them outside the lock, then wait again
             if (stopping_) return;
             continue;
           }
-          if (static_cast<int>(queue_.size()) >= options_.max_batch || stopping_) break;
+          if (static_cast<int>(queue_.size()) >= options_.max_batch || stopping_ || split_due_) {
+            break;
+          }
           const absl::Time dispatch_at = queue_.front().enqueued + options_.max_queue_delay;
           if (now >= dispatch_at) break;
           work_cv_.wait_until(lock, absl::ToChronoTime(dispatch_at));
         }
-        while (!queue_.empty() && static_cast<int>(batch.size()) < options_.max_batch) {
+        // This worker's share of what is due: the idle workers, itself included, split it.
+        const int idle = std::max(1, options_.workers - busy_workers_);
+        const int due = std::min(options_.max_batch, static_cast<int>(queue_.size()));
+        const int share = (due + idle - 1) / idle;
+        while (!queue_.empty() && static_cast<int>(batch.size()) < share) {
           Entry& front = queue_.front();
           if (IsStale(front, now)) {
             dropped.push_back(std::move(front));
@@ -344,6 +359,8 @@ class DynamicBatcher {
           }
           queue_.pop_front();
         }
+        // The rest of a split is due at once for the next idle worker.
+        split_due_ = idle > 1 && !queue_.empty() && share < due;
         ReportDepthLocked();
         if (!batch.empty()) ++busy_workers_;
         // What is left needs another worker's timer (or a worker at once when full).
@@ -408,6 +425,7 @@ class DynamicBatcher {
   std::condition_variable work_cv_;
   std::deque<Entry> queue_;  // guarded by mu_
   bool stopping_ = false;    // guarded by mu_
+  bool split_due_ = false;   // guarded by mu_: the queue's front is the due rest of a split
   int busy_workers_ = 0;     // guarded by mu_
 
   std::mutex stop_mu_;    // serialises Stop()

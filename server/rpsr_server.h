@@ -40,7 +40,7 @@ struct BatchingOptions {
   int max_queue = 1024;
   // Concurrent batches, and LibTorch intra-op threads each (DEPS.md: one per worker is best).
   // workers 0: one per hardware thread, so a server uses its machine by default (on this 2-core
-  // machine 16 clients got 1.7x the pairs per second of one worker: README, Serving load).
+  // machine 16 clients got 1.9x the pairs per second of one worker: README, Serving load).
   int workers = 0;
   int intra_op_threads = 1;
 };

@@ -412,6 +412,41 @@ TEST(DynamicBatcherTest, WorkersRunTheirInitOnTheirOwnThreadAndShareTheQueue) {
   EXPECT_GE(batch_threads.size(), 2u);  // several workers took batches
 }
 
+// A due batch is shared among idle workers: with two idle, a full queue of 16 runs as two batches
+// of 8 at once, not one of 16 while the other worker idles; the rest of a split does not wait for
+// the queue delay again (it is 60 s here).
+TEST(DynamicBatcherTest, IdleWorkersShareADueBatch) {
+  DynamicBatcherOptions options;
+  options.workers = 2;
+  options.max_batch = 16;
+  options.max_queue_delay = absl::Seconds(60);
+  std::mutex mu;
+  std::set<std::thread::id> threads;
+  RecordingSquarer recorder;
+  auto batcher = MakeBatcher(
+      options, [&](absl::Span<int> requests) -> absl::StatusOr<std::vector<absl::StatusOr<int>>> {
+        {
+          std::lock_guard<std::mutex> lock(mu);
+          threads.insert(std::this_thread::get_id());
+        }
+        return recorder.Function()(requests);
+      });
+  std::vector<std::future<absl::StatusOr<int>>> futures;
+  for (int i = 0; i < 16; ++i) futures.push_back(batcher->Submit(i));
+  for (int i = 0; i < 16; ++i) {
+    absl::StatusOr<int> answer = Get(futures[i]);
+    ASSERT_TRUE(answer.ok()) << answer.status();
+    EXPECT_EQ(*answer, i * i);
+  }
+  const std::vector<std::vector<int>> batches = recorder.batches();
+  ASSERT_EQ(batches.size(), 2u);
+  EXPECT_EQ(batches[0].size(), 8u);
+  EXPECT_EQ(batches[1].size(), 8u);
+  std::lock_guard<std::mutex> lock(mu);
+  EXPECT_EQ(threads.size(), 2u);
+  batcher->Stop();
+}
+
 TEST(DynamicBatcherTest, HooksSeeEveryRequestAndBatch) {
   std::atomic<int> waits{0};
   std::atomic<int> batched_requests{0};
