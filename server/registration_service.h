@@ -30,6 +30,9 @@ struct RegistrationJob {
   std::shared_ptr<const core::Octree> target;
   core::RegistrationOptions options;
   absl::Time enqueued;
+  // The target is a cloud of the session store, likely registered against again: its prepared
+  // target is kept (PreparedTargetCache). Inline clouds and Track frames are used once.
+  bool target_from_store = false;
 };
 
 struct RegistrationOutcome {

@@ -209,6 +209,94 @@ int64_t RpsrNet::NumParameters() const {
   return n;
 }
 
+absl::StatusOr<std::shared_ptr<const NetTargetEncoding>> RpsrNet::EncodeTarget(
+    const Octree& target) const {
+  try {
+    torch::InferenceMode inference;
+    const NetPair pair{&target, &target};
+    absl::StatusOr<net::PackedClouds> packed =
+        net::PackTargets(absl::MakeConstSpan(&pair, 1), impl_->config.cube_half_length);
+    if (!packed.ok()) return packed.status();
+    const net::PackedClouds on_device = packed->To(impl_->device);
+    auto encoding = std::make_shared<NetTargetEncoding>();
+    encoding->owner = impl_.get();
+    encoding->tree = &target;
+    encoding->token_com = on_device.token_com;
+    encoding->token_empty = on_device.token_empty;
+    encoding->encoded = impl_->network->EncodeTarget(on_device);
+    return std::shared_ptr<const NetTargetEncoding>(std::move(encoding));
+  } catch (const c10::Error& e) {
+    return absl::InternalError(
+        absl::StrCat("network target encoding failed: ", e.what_without_backtrace()));
+  }
+}
+
+namespace {
+
+// The batch's target side: packed and encoded here for the pairs without a NetTargetEncoding,
+// concatenated along the batch dimension with the given ones for the others, in pair order.
+absl::Status TargetSide(RpsrNet::Impl& impl, absl::Span<const NetPair> pairs,
+                        net::PackedClouds& target, net::EncodedTarget& encoded) {
+  std::vector<NetPair> missing;
+  std::vector<size_t> missing_index(pairs.size(), pairs.size());
+  for (size_t b = 0; b < pairs.size(); ++b) {
+    const NetTargetEncoding* given = pairs[b].target_encoding;
+    if (given == nullptr) {
+      missing_index[b] = missing.size();
+      missing.push_back(pairs[b]);
+    } else if (given->owner != &impl || given->tree != pairs[b].target) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("pair ", b, ": its target encoding was made ",
+                       given->owner != &impl ? "by another network" : "from another tree"));
+    }
+  }
+  if (missing.size() == pairs.size()) {  // the common case: one batched encoding
+    absl::StatusOr<net::PackedClouds> packed =
+        net::PackTargets(pairs, impl.config.cube_half_length);
+    if (!packed.ok()) return packed.status();
+    target = packed->To(impl.device);
+    encoded = impl.network->EncodeTarget(target);
+    return absl::OkStatus();
+  }
+  net::PackedClouds fresh;
+  net::EncodedTarget fresh_encoded;
+  if (!missing.empty()) {
+    absl::StatusOr<net::PackedClouds> packed =
+        net::PackTargets(missing, impl.config.cube_half_length);
+    if (!packed.ok()) return packed.status();
+    fresh = packed->To(impl.device);
+    fresh_encoded = impl.network->EncodeTarget(fresh);
+  }
+  std::vector<torch::Tensor> com, empty, embedding, memory, self_attended;
+  for (size_t b = 0; b < pairs.size(); ++b) {
+    if (const NetTargetEncoding* given = pairs[b].target_encoding) {
+      com.push_back(given->token_com);
+      empty.push_back(given->token_empty);
+      embedding.push_back(given->encoded.embedding);
+      memory.push_back(given->encoded.memory);
+      self_attended.push_back(given->encoded.self_attended);
+    } else {
+      const int64_t m = static_cast<int64_t>(missing_index[b]);
+      com.push_back(fresh.token_com.narrow(0, m, 1));
+      empty.push_back(fresh.token_empty.narrow(0, m, 1));
+      embedding.push_back(fresh_encoded.embedding.narrow(0, m, 1));
+      memory.push_back(fresh_encoded.memory.narrow(1, m, 1));
+      self_attended.push_back(fresh_encoded.self_attended.narrow(1, m, 1));
+    }
+  }
+  // Pass reads only the target's tokens (centres of mass and emptiness) besides the encodings.
+  target = net::PackedClouds{};
+  target.batch = static_cast<int64_t>(pairs.size());
+  target.token_com = torch::cat(com, 0);
+  target.token_empty = torch::cat(empty, 0);
+  encoded.embedding = torch::cat(embedding, 0);
+  encoded.memory = torch::cat(memory, 1);
+  encoded.self_attended = torch::cat(self_attended, 1);
+  return absl::OkStatus();
+}
+
+}  // namespace
+
 absl::StatusOr<std::vector<NetEstimate>> RpsrNet::Estimate(absl::Span<const NetPair> pairs,
                                                            int passes) const {
   if (pairs.empty()) return std::vector<NetEstimate>{};
@@ -216,11 +304,16 @@ absl::StatusOr<std::vector<NetEstimate>> RpsrNet::Estimate(absl::Span<const NetP
   try {
     torch::InferenceMode inference;
     net::RpsrNetwork& network = impl_->network;
-    absl::StatusOr<net::PackedClouds> targets =
-        net::PackTargets(pairs, impl_->config.cube_half_length);
-    if (!targets.ok()) return targets.status();
-    const net::PackedClouds target = targets->To(impl_->device);
-    const net::EncodedTarget encoded_target = network->EncodeTarget(target);
+    for (size_t b = 0; b < pairs.size(); ++b) {
+      if (pairs[b].source == nullptr || pairs[b].target == nullptr) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("pair ", b, " lacks a source or target tree"));
+      }
+    }
+    net::PackedClouds target;
+    net::EncodedTarget encoded_target;
+    absl::Status target_side = TargetSide(*impl_, pairs, target, encoded_target);
+    if (!target_side.ok()) return target_side;
 
     std::vector<NetEstimate> results(pairs.size());
     std::vector<Eigen::Isometry3d> estimates;

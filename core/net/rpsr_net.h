@@ -44,12 +44,23 @@ struct RpsrNetConfig {
   double cube_half_length = 0.0;
 };
 
+// A target's part of the network's work, computed once (RpsrNet::EncodeTarget) and reused by
+// every Estimate against that target: its tree convolutions, its tokens, and the Transformer
+// steps that read only the target. With net+refine's two passes that is about a third of an
+// object pair's network time, which a client registering many sources against one reference
+// (a model scan, a map) pays once. Opaque (LibTorch stays inside core/net), immutable, safe to
+// share across threads; valid only with the RpsrNet that made it and for the tree it was made
+// from (Estimate checks both).
+class NetTargetEncoding;
+
 // One pair to register. Trees must have depth >= 5 with neighbour tables to depth 5 (the
 // BarnesHutTreeOptions defaults). `initial` is a starting guess of T_target_source.
+// `target_encoding` (optional): EncodeTarget(*target) of the same network.
 struct NetPair {
   const Octree* source = nullptr;
   const Octree* target = nullptr;
   Eigen::Isometry3d initial = Eigen::Isometry3d::Identity();
+  const NetTargetEncoding* target_encoding = nullptr;
 };
 
 struct NetEstimate {
@@ -83,6 +94,10 @@ class RpsrNet {
   // passes <= 0 uses config().passes. Results equal those of the pairs one at a time.
   absl::StatusOr<std::vector<NetEstimate>> Estimate(absl::Span<const NetPair> pairs,
                                                     int passes = 0) const;
+
+  // The target's part of Estimate, for reuse across calls (see NetTargetEncoding). Estimates
+  // with it equal those without (the same operators on the same rows; the tests compare them).
+  absl::StatusOr<std::shared_ptr<const NetTargetEncoding>> EncodeTarget(const Octree& target) const;
 
   // For the trainer (core/net/trainer.cc), which lives beside the implementation.
   struct Impl;

@@ -19,6 +19,16 @@ struct RpsrNet::Impl {
   torch::Device device = torch::kCPU;
 };
 
+// What EncodeTarget keeps: one target's tokens and encodings, batch dimension 1.
+class NetTargetEncoding {
+ public:
+  const RpsrNet::Impl* owner = nullptr;  // the network that made it
+  const Octree* tree = nullptr;          // the tree it was made from
+  torch::Tensor token_com;               // [1, T, 3]
+  torch::Tensor token_empty;             // [1, T]
+  net::EncodedTarget encoded;            // embedding [1, T, E], memory and self_attended [T, 1, E]
+};
+
 namespace net {
 
 std::string ConfigToText(const RpsrNetConfig& config);

@@ -367,6 +367,31 @@ absl::StatusOr<RegistrationResult> Registrar::Register(const Octree& source, con
   return std::move(results.front());
 }
 
+absl::StatusOr<RegistrationResult> Registrar::Register(const Octree& source,
+                                                       const PreparedTarget& target,
+                                                       const RegistrationOptions& options) const {
+  const RegistrationRequest request{&source, &target.tree(), options, &target};
+  std::vector<absl::StatusOr<RegistrationResult>> results =
+      RegisterBatch(absl::MakeConstSpan(&request, 1));
+  return std::move(results.front());
+}
+
+absl::StatusOr<std::shared_ptr<const PreparedTarget>> Registrar::PrepareTarget(
+    const Octree& target) const {
+  // What Register checks of a target for the network's modes.
+  if (absl::Status s = CheckTree(&target, "target", RegistrationMode::kNetRefine); !s.ok()) {
+    return s;
+  }
+  absl::StatusOr<std::shared_ptr<const NetTargetEncoding>> encoding =
+      state_->net->EncodeTarget(target);
+  if (!encoding.ok()) return encoding.status();
+  auto prepared = std::make_shared<PreparedTarget>();
+  prepared->tree_ = &target;
+  prepared->registrar_ = this;
+  prepared->net_encoding = *std::move(encoding);
+  return std::shared_ptr<const PreparedTarget>(std::move(prepared));
+}
+
 std::vector<absl::StatusOr<RegistrationResult>> Registrar::RegisterBatch(
     absl::Span<const std::pair<const Octree*, const Octree*>> pairs,
     const RegistrationOptions& options) const {
@@ -384,6 +409,12 @@ std::vector<absl::StatusOr<RegistrationResult>> Registrar::RegisterBatch(
   for (size_t i = 0; i < requests.size(); ++i) {
     const RegistrationRequest& r = requests[i];
     absl::Status status = ValidateRequest(r.source, r.target, r.options);
+    if (status.ok() && r.prepared_target != nullptr &&
+        (r.prepared_target->registrar_ != this || r.prepared_target->tree_ != r.target)) {
+      status = absl::InvalidArgumentError(absl::StrCat(
+          "the prepared target was made ",
+          r.prepared_target->registrar_ != this ? "by another Registrar" : "from another tree"));
+    }
     if (!status.ok()) {
       results[i] = status;
     } else {
@@ -404,9 +435,11 @@ std::vector<absl::StatusOr<RegistrationResult>> Registrar::RegisterBatch(
     std::vector<NetPair> batch;
     batch.reserve(members.size());
     for (size_t i : members) {
+      const PreparedTarget* prepared = requests[i].prepared_target;
       batch.push_back(
           {requests[i].source, requests[i].target,
-           requests[i].options.initial_T_target_source.value_or(Eigen::Isometry3d::Identity())});
+           requests[i].options.initial_T_target_source.value_or(Eigen::Isometry3d::Identity()),
+           prepared != nullptr ? prepared->net_encoding.get() : nullptr});
     }
     const auto start = Clock::now();
     absl::StatusOr<std::vector<NetEstimate>> estimates = state_->net->Estimate(batch, passes);

@@ -127,11 +127,32 @@ struct RegistrationResult {
   std::vector<double> confidence_features;
 };
 
+class NetTargetEncoding;  // core/net/rpsr_net.h
+
+// A target's share of the work of registering against it, done once (Registrar::PrepareTarget)
+// for a caller that registers many sources against one target (a reference scan of an object,
+// a map): the network's encoding of the target (a third of an object pair's network time with
+// two passes; registrar_bench, BM_RegisterObjectsPreparedTarget). Immutable and safe to share
+// across threads; valid with the Registrar that made it, for the tree it was made from (which
+// must outlive it).
+class PreparedTarget {
+ public:
+  const Octree& tree() const { return *tree_; }
+
+ private:
+  friend class Registrar;
+  const Octree* tree_ = nullptr;
+  const void* registrar_ = nullptr;
+  std::shared_ptr<const NetTargetEncoding> net_encoding;
+};
+
 // One pair of a batch, with its own options (a batch gathers requests of many clients).
+// `prepared_target` (optional): PrepareTarget(*target) of the same Registrar.
 struct RegistrationRequest {
   const Octree* source = nullptr;
   const Octree* target = nullptr;
   RegistrationOptions options;
+  const PreparedTarget* prepared_target = nullptr;
 };
 
 struct RegistrarConfig {
@@ -158,6 +179,14 @@ class Registrar {
   // errors: they return valid = false with the reason.
   absl::StatusOr<RegistrationResult> Register(const Octree& source, const Octree& target,
                                               const RegistrationOptions& options = {}) const;
+  // The same against a prepared target: equal results (within the network's batching tolerance),
+  // less time in the network.
+  absl::StatusOr<RegistrationResult> Register(const Octree& source, const PreparedTarget& target,
+                                              const RegistrationOptions& options = {}) const;
+
+  // Does a target's share of the work once (see PreparedTarget). InvalidArgument for a tree the
+  // network cannot read (as Register would say).
+  absl::StatusOr<std::shared_ptr<const PreparedTarget>> PrepareTarget(const Octree& target) const;
 
   // One batched forward pass for all network modes' pairs (grouped by passes), then refinement
   // per pair. Results equal Register() pair by pair within the network's batching tolerance

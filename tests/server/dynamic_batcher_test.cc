@@ -6,6 +6,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <condition_variable>
 #include <future>
 #include <memory>
 #include <mutex>
@@ -421,13 +422,19 @@ TEST(DynamicBatcherTest, IdleWorkersShareADueBatch) {
   options.max_batch = 16;
   options.max_queue_delay = absl::Seconds(60);
   std::mutex mu;
+  std::condition_variable both_running;
   std::set<std::thread::id> threads;
   RecordingSquarer recorder;
   auto batcher = MakeBatcher(
       options, [&](absl::Span<int> requests) -> absl::StatusOr<std::vector<absl::StatusOr<int>>> {
         {
-          std::lock_guard<std::mutex> lock(mu);
+          // Each batch waits (at most 10 s) for a second one to run beside it, so a fast first
+          // worker cannot come back for the rest itself before the other wakes.
+          std::unique_lock<std::mutex> lock(mu);
           threads.insert(std::this_thread::get_id());
+          both_running.notify_all();
+          both_running.wait_for(lock, std::chrono::seconds(10),
+                                [&] { return threads.size() >= 2; });
         }
         return recorder.Function()(requests);
       });

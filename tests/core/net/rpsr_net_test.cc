@@ -100,6 +100,44 @@ TEST(RpsrNetTest, BatchedEstimatesEqualOneByOne) {
   EXPECT_EQ((*three_passes)[0].per_pass.size(), 3u);
 }
 
+// A target encoded once (EncodeTarget) gives the estimates of a fresh encoding (the same
+// operators on the same rows: equal to every bit); an encoding of another tree or network is
+// refused.
+TEST(RpsrNetTest, EncodedTargetGivesTheSameEstimates) {
+  auto net = RpsrNet::Create(SmallConfig(), 5);
+  auto other_net = RpsrNet::Create(SmallConfig(), 6);
+  ASSERT_TRUE(net.ok() && other_net.ok());
+  std::vector<Octree> trees;
+  for (int i = 0; i < 4; ++i) {
+    auto tree = BuildOctree(testing::AsymmetricObject(700 + 300 * i, 40 + i, 0.25));
+    ASSERT_TRUE(tree.ok());
+    trees.push_back(*std::move(tree));
+  }
+  auto encoding = (*net)->EncodeTarget(trees[1]);
+  ASSERT_TRUE(encoding.ok()) << encoding.status();
+  const NetPair fresh{&trees[0], &trees[1], testing::SmallMotion(0.1, {0.05, 0, 0})};
+  NetPair reused = fresh;
+  reused.target_encoding = encoding->get();
+  auto a = (*net)->Estimate({&fresh, 1}, 2);
+  auto b = (*net)->Estimate({&reused, 1}, 2);
+  ASSERT_TRUE(a.ok() && b.ok()) << a.status() << b.status();
+  EXPECT_EQ((*a)[0].T_target_source.matrix(), (*b)[0].T_target_source.matrix());
+  EXPECT_EQ((*a)[0].score_peak, (*b)[0].score_peak);
+
+  // A batch mixing encoded and fresh targets: ShippedObjectModelTest (model_test.cc), where the
+  // estimates are well conditioned (this untrained network's soft correspondences are nearly
+  // uniform, so its rotations amplify float rounding across batch sizes).
+  const NetPair other{&trees[2], &trees[3]};
+  NetPair wrong_tree = other;
+  wrong_tree.target_encoding = encoding->get();
+  EXPECT_EQ((*net)->Estimate({&wrong_tree, 1}).status().code(), absl::StatusCode::kInvalidArgument);
+  auto foreign = (*other_net)->EncodeTarget(trees[1]);
+  ASSERT_TRUE(foreign.ok());
+  NetPair wrong_net = fresh;
+  wrong_net.target_encoding = foreign->get();
+  EXPECT_EQ((*net)->Estimate({&wrong_net, 1}).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
 TEST(RpsrNetTest, BatchedPassEqualsOneByOneBeforeTheSvd) {
   net::RpsrNetwork network(SmallConfig());
   network->eval();

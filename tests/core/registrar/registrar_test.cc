@@ -228,6 +228,54 @@ TEST(RegistrarBatchTest, BatchEqualsPairsOneByOne) {
   }
 }
 
+// A prepared target (PrepareTarget) gives Register's answer for each mode (the network's part on
+// one pair is the same computation: equal to every bit), in a batch beside unprepared pairs too;
+// one made from another tree or by another Registrar is that pair's InvalidArgument.
+TEST(RegistrarPreparedTargetTest, SameAnswersAndMisuseIsRefused) {
+  const ObjectPair pair = AsymmetricObjectPair(7, 30.0);
+  const Octree source = TreeOf(pair.source);
+  const Octree target = TreeOf(pair.target);
+  auto prepared = SharedRegistrar().PrepareTarget(target);
+  ASSERT_TRUE(prepared.ok()) << prepared.status();
+  EXPECT_EQ(&(*prepared)->tree(), &target);
+  for (RegistrationMode mode :
+       {RegistrationMode::kNet, RegistrationMode::kNetRefine, RegistrationMode::kRefine}) {
+    RegistrationOptions options;
+    options.mode = mode;
+    auto plain = SharedRegistrar().Register(source, target, options);
+    auto with = SharedRegistrar().Register(source, **prepared, options);
+    ASSERT_TRUE(plain.ok() && with.ok()) << plain.status() << with.status();
+    EXPECT_EQ(plain->T_target_source.matrix(), with->T_target_source.matrix());
+    EXPECT_EQ(plain->net_T_target_source.matrix(), with->net_T_target_source.matrix());
+    EXPECT_EQ(plain->confidence, with->confidence);
+  }
+
+  const ObjectPair other_pair = AsymmetricObjectPair(8, 30.0);
+  const Octree other_source = TreeOf(other_pair.source);
+  const Octree other_target = TreeOf(other_pair.target);
+  std::vector<RegistrationRequest> requests = {
+      {&source, &target, {}, prepared->get()},
+      {&other_source, &other_target, {}},
+      {&other_source, &other_target, {}, prepared->get()},  // prepared from another tree
+  };
+  auto batch = SharedRegistrar().RegisterBatch(requests);
+  ASSERT_EQ(batch.size(), 3u);
+  ASSERT_TRUE(batch[0].ok() && batch[1].ok()) << batch[0].status() << batch[1].status();
+  auto single = SharedRegistrar().Register(other_source, other_target);
+  ASSERT_TRUE(single.ok());
+  EXPECT_LT(ErrorOf(batch[1]->T_target_source, single->T_target_source).rotation_deg, 0.05);
+  EXPECT_EQ(batch[2].status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(batch[2].status().message(), HasSubstr("another tree"));
+
+  auto another = Registrar::Create();
+  ASSERT_TRUE(another.ok());
+  auto foreign = (*another)->Register(source, **prepared);
+  EXPECT_EQ(foreign.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(foreign.status().message(), HasSubstr("another Registrar"));
+  EXPECT_EQ(SharedRegistrar().PrepareTarget(TreeOf(pair.target, 4)).status().code(),
+            absl::StatusCode::kInvalidArgument);
+}
+
 TEST(RegistrarInputTest, BadInputsAreInvalidArgumentPerPair) {
   const ObjectPair pair = AsymmetricObjectPair(3, 20.0);
   const Octree good = TreeOf(pair.source);
