@@ -1,9 +1,10 @@
 // The targets the service prepared (core::Registrar::PrepareTarget), kept for the next pairs
 // against the same cached cloud: a client registering many scans against one reference pays the
 // target's network encoding once (objects, net+refine: 14.2 -> 11.7 ms a pair in
-// registrar_bench). Bounded (least recently used out), keyed by the tree, holding it only weakly:
-// a cloud evicted or released from the session store is not kept alive here, and a new tree at
-// a freed one's address is never served the old encoding (the weak pointer has expired).
+// registrar_bench). Bounded (BatchingOptions::prepared_targets, rpsrd --prepared_targets) (least
+// recently used out), keyed by the tree, holding it only weakly: a cloud evicted or released from
+// the session store is not kept alive here, and a new tree at a freed one's address is never served
+// the old encoding (the weak pointer has expired).
 #ifndef RPSR_SERVER_PREPARED_TARGET_CACHE_H_
 #define RPSR_SERVER_PREPARED_TARGET_CACHE_H_
 

@@ -41,8 +41,9 @@ absl::StatusOr<std::unique_ptr<RegistrationBatcher>> MakeRegistrationBatcher(
     hooks.batch_done = [metrics](int size, double) { metrics->ObserveBatch(size); };
     hooks.queue_depth = [metrics](int depth) { metrics->SetQueueDepth(depth); };
   }
-  // Shared by the workers; 64 prepared targets are ~6 MB.
-  auto prepared_targets = std::make_shared<PreparedTargetCache>(registrar, 64);
+  // Shared by the workers.
+  auto prepared_targets = std::make_shared<PreparedTargetCache>(
+      registrar, static_cast<size_t>(std::max(0, options.prepared_targets)));
   auto batch_function = [registrar, metrics, prepared_targets](absl::Span<RegistrationJob> jobs)
       -> absl::StatusOr<std::vector<absl::StatusOr<RegistrationOutcome>>> {
     const absl::Time start = absl::Now();

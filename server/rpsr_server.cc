@@ -52,6 +52,9 @@ absl::Status ValidateOptions(const ServerOptions& o) {
         "batching needs max_batch, max_queue, workers, intra_op_threads >= 1 and "
         "max_queue_delay >= 0");
   }
+  if (o.batching.prepared_targets < 0) {
+    return invalid("batching.prepared_targets must be >= 0, got ", o.batching.prepared_targets);
+  }
   if (o.max_points_per_cloud == 0) return invalid("max_points_per_cloud is 0");
   if (o.max_open_streams == 0) return invalid("max_open_streams is 0");
   if (o.max_message_bytes < 1024 || o.max_message_bytes > (1u << 31) - 1) {

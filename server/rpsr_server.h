@@ -43,6 +43,9 @@ struct BatchingOptions {
   // machine 16 clients got 1.9x the pairs per second of one worker: README, Serving load).
   int workers = 0;
   int intra_op_threads = 1;
+  // Prepared targets kept for cached clouds registered against again (PreparedTargetCache,
+  // ~100 KB each: 512 are ~50 MB beside the cache's trees); 0: none.
+  int prepared_targets = 512;
 };
 
 struct ServerOptions {

@@ -57,6 +57,9 @@ ABSL_FLAG(int, max_queue, kBatching.max_queue,
 ABSL_FLAG(int, workers, kBatching.workers,
           "Concurrent batches (worker threads); 0: one per hardware thread");
 ABSL_FLAG(int, intra_op_threads, kBatching.intra_op_threads, "LibTorch threads per worker");
+ABSL_FLAG(int, prepared_targets, kBatching.prepared_targets,
+          "Prepared targets kept for cached clouds registered against again (~100 KB each); 0: "
+          "none");
 ABSL_FLAG(uint64_t, max_points_per_cloud, kDefaults.max_points_per_cloud,
           "Most points in one uploaded cloud or Track frame");
 ABSL_FLAG(uint64_t, max_inline_points, kDefaults.max_inline_points,
@@ -132,6 +135,7 @@ int main(int argc, char** argv) {
   options.batching.max_queue = absl::GetFlag(FLAGS_max_queue);
   options.batching.workers = absl::GetFlag(FLAGS_workers);
   options.batching.intra_op_threads = absl::GetFlag(FLAGS_intra_op_threads);
+  options.batching.prepared_targets = absl::GetFlag(FLAGS_prepared_targets);
   options.max_points_per_cloud = absl::GetFlag(FLAGS_max_points_per_cloud);
   options.max_inline_points = absl::GetFlag(FLAGS_max_inline_points);
   options.max_open_streams = absl::GetFlag(FLAGS_max_open_streams);

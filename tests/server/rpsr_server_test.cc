@@ -186,6 +186,14 @@ TEST_F(ServerTest, RegistersCachedCloudsAsTheRegistrarDoesInProcess) {
       core::ErrorOf(TransformOf(result.transform_target_source()), direct->T_target_source);
   EXPECT_LT(difference.rotation_deg, 0.01);
   EXPECT_LT(difference.translation, 1e-4);
+
+  // Again against the same cached target: the server now reuses its prepared target
+  // (PreparedTargetCache), and the answer is the same to every bit.
+  v1::RegisterResponse again;
+  ASSERT_TRUE(client_->RegisterIds(session_, source, target, options, &again).ok());
+  const Eigen::Isometry3d first = TransformOf(result.transform_target_source());
+  EXPECT_EQ(TransformOf(again.result().transform_target_source()).matrix(), first.matrix());
+  EXPECT_EQ(again.result().confidence(), result.confidence());
 }
 
 TEST_F(ServerTest, RegistersInlineCloudsWithoutASession) {
