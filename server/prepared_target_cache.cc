@@ -9,7 +9,8 @@ PreparedTargetCache::PreparedTargetCache(std::shared_ptr<const core::Registrar> 
     : registrar_(std::move(registrar)), capacity_(capacity) {}
 
 std::shared_ptr<const core::PreparedTarget> PreparedTargetCache::Get(
-    const std::shared_ptr<const core::Octree>& tree) {
+    const std::shared_ptr<const core::Octree>& tree, bool* hit) {
+  if (hit != nullptr) *hit = false;
   if (tree == nullptr || capacity_ == 0) return nullptr;
   const core::Octree* key = tree.get();
   {
@@ -19,6 +20,7 @@ std::shared_ptr<const core::PreparedTarget> PreparedTargetCache::Get(
       // Same address, same tree only while the cached weak pointer still owns it.
       if (it->second.tree.lock() == tree) {
         ++hits_;
+        if (hit != nullptr) *hit = true;
         recency_.splice(recency_.begin(), recency_, it->second.recency);
         return it->second.prepared;
       }

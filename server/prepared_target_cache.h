@@ -27,7 +27,9 @@ class PreparedTargetCache {
   // The prepared target of `tree`, prepared now on a miss; null when it cannot be prepared (the
   // registrar then reports the tree's problem itself). Thread-safe; two threads missing at once
   // may both prepare, and the first kept wins.
-  std::shared_ptr<const core::PreparedTarget> Get(const std::shared_ptr<const core::Octree>& tree);
+  // `hit` (optional) says whether it was kept from before.
+  std::shared_ptr<const core::PreparedTarget> Get(const std::shared_ptr<const core::Octree>& tree,
+                                                  bool* hit = nullptr);
 
   size_t size() const;
   uint64_t hits() const;

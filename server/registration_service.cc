@@ -53,7 +53,9 @@ absl::StatusOr<std::unique_ptr<RegistrationBatcher>> MakeRegistrationBatcher(
     for (size_t i = 0; i < jobs.size(); ++i) {
       const RegistrationJob& job = jobs[i];
       if (job.target_from_store && job.options.mode != core::RegistrationMode::kRefine) {
-        prepared[i] = prepared_targets->Get(job.target);
+        bool hit = false;
+        prepared[i] = prepared_targets->Get(job.target, &hit);
+        if (metrics != nullptr) metrics->RecordPreparedTarget(hit, prepared_targets->size());
       }
       requests.push_back({job.source.get(), job.target.get(), job.options, prepared[i].get()});
     }

@@ -104,6 +104,21 @@ ServiceMetrics::ServiceMetrics() : registry_(std::make_shared<prometheus::Regist
                        .Help("1 once the registration model is loaded")
                        .Register(r)
                        .Add({});
+  prepared_hits_ = &prometheus::BuildCounter()
+                        .Name("rpsr_prepared_target_hits_total")
+                        .Help("Registrations against a cached cloud whose prepared target was kept")
+                        .Register(r)
+                        .Add({});
+  prepared_misses_ = &prometheus::BuildCounter()
+                          .Name("rpsr_prepared_target_misses_total")
+                          .Help("Registrations against a cached cloud that prepared its target")
+                          .Register(r)
+                          .Add({});
+  prepared_targets_ = &prometheus::BuildGauge()
+                           .Name("rpsr_prepared_targets")
+                           .Help("Prepared targets kept (about 100 KB each)")
+                           .Register(r)
+                           .Add({});
   // The series a dashboard expects exist from the start, at zero.
   for (const char* reason : {"memory_budget", "session_expired", "session_closed", "released"}) {
     evictions_->Add({{"reason", reason}});

@@ -10,6 +10,8 @@
 //   rpsr_cache_hits_total / rpsr_cache_misses_total   counters, cached cloud look-ups
 //   rpsr_cache_evictions_total{reason}                counter, clouds leaving the cache
 //   rpsr_cache_bytes / rpsr_cache_clouds / rpsr_sessions   gauges
+//   rpsr_prepared_target_hits_total / _misses_total   counters, targets prepared once and reused
+//   rpsr_prepared_targets                             gauge, prepared targets kept
 //   rpsr_uploaded_points_total                        counter
 //   rpsr_model_loaded                                 gauge, 1 once the model is loaded
 // Exposed by prometheus-cpp's Exposer (server/rpsr_server.cc) on its own port.
@@ -46,6 +48,11 @@ class ServiceMetrics {
   void SetQueueDepth(int depth) { queue_depth_->Set(depth); }
   void AddUploadedPoints(double points) { uploaded_points_->Increment(points); }
   void SetModelLoaded(bool loaded) { model_loaded_->Set(loaded ? 1.0 : 0.0); }
+  // One look-up of the prepared-target cache (PreparedTargetCache) and its size after it.
+  void RecordPreparedTarget(bool hit, size_t kept) {
+    (hit ? prepared_hits_ : prepared_misses_)->Increment();
+    prepared_targets_->Set(static_cast<double>(kept));
+  }
 
   // Hooks that keep the cache series up to date.
   SessionStoreHooks CacheHooks();
@@ -68,6 +75,9 @@ class ServiceMetrics {
   prometheus::Gauge* sessions_;
   prometheus::Counter* uploaded_points_;
   prometheus::Gauge* model_loaded_;
+  prometheus::Counter* prepared_hits_;
+  prometheus::Counter* prepared_misses_;
+  prometheus::Gauge* prepared_targets_;
 };
 
 // The name of a gRPC status code as Prometheus labels and logs show it ("DEADLINE_EXCEEDED").

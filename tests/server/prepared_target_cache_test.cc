@@ -36,10 +36,13 @@ std::shared_ptr<const core::Registrar> SharedRegistrar() {
 TEST(PreparedTargetCacheTest, PreparesOnceAndServesAgain) {
   PreparedTargetCache cache(SharedRegistrar(), 4);
   const auto tree = ObjectTree(1);
-  const auto first = cache.Get(tree);
+  bool hit = true;
+  const auto first = cache.Get(tree, &hit);
   ASSERT_NE(first, nullptr);
+  EXPECT_FALSE(hit);
   EXPECT_EQ(&first->tree(), tree.get());
-  EXPECT_EQ(cache.Get(tree), first);
+  EXPECT_EQ(cache.Get(tree, &hit), first);
+  EXPECT_TRUE(hit);
   EXPECT_EQ(cache.hits(), 1u);
   EXPECT_EQ(cache.misses(), 1u);
   EXPECT_EQ(cache.size(), 1u);

@@ -590,6 +590,10 @@ TEST_F(ServerTest, MetricsEndpointExportsTheSeries) {
   EXPECT_GE(MetricValue(text, "rpsr_sessions").value_or(0), 1);
   EXPECT_EQ(MetricValue(text, "rpsr_model_loaded").value_or(0), 1);
   EXPECT_TRUE(MetricValue(text, "rpsr_queue_depth").has_value());
+  // The Register above prepared its cached target (the server's first use of these clouds).
+  EXPECT_GE(MetricValue(text, "rpsr_prepared_target_misses_total").value_or(0), 1);
+  EXPECT_TRUE(MetricValue(text, "rpsr_prepared_target_hits_total").has_value());
+  EXPECT_GE(MetricValue(text, "rpsr_prepared_targets").value_or(0), 1);
 }
 
 // --- servers of their own ------------------------------------------------------------------
