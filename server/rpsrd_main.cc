@@ -55,7 +55,8 @@ ABSL_FLAG(absl::Duration, max_queue_delay, kBatching.max_queue_delay,
 ABSL_FLAG(int, max_queue, kBatching.max_queue,
           "Registrations waiting at most; more are answered RESOURCE_EXHAUSTED");
 ABSL_FLAG(int, workers, kBatching.workers,
-          "Concurrent batches (worker threads); 0: one per hardware thread");
+          "Concurrent batches (worker threads); 0: one per hardware thread (CPU inference; with "
+          "a GPU use 1-2 so that batches form)");
 ABSL_FLAG(int, intra_op_threads, kBatching.intra_op_threads, "LibTorch threads per worker");
 ABSL_FLAG(int, prepared_targets, kBatching.prepared_targets,
           "Prepared targets kept for cached clouds registered against again (~100 KB each); 0: "
