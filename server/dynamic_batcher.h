@@ -23,14 +23,14 @@
 // - Stop() either drains (runs everything queued, without waiting for companions) or rejects what
 //   is queued with UNAVAILABLE; either way batches already running finish, and every accepted
 //   request is answered exactly once before Stop returns.
-// - Not Triton's: a due batch is shared among the idle workers. A worker that finds n requests
-//   due and k workers idle (itself included) takes ceil(n / k) of them (at most max_batch), and the
-//   rest are due at once for the next idle worker, so no worker waits idle while another runs
-//   requests it could have run. This is for bursts (a fleet's synchronised 10 Hz frames): 16
-//   requests arriving together on 2 idle workers run as two batches of 8 at once instead of one
-//   of 16, which on a CPU (where a batch costs what its requests cost one by one) halves their
-//   latency. In the closed-loop load benchmark (16 clients, 2 workers) it changed nothing beyond
-//   noise: there requests arrive one by one and the batches form behind busy workers.
+// - Not Triton's: what is due is split once among the workers. A worker that finds n requests
+//   due takes ceil(n / workers) of them (at most max_batch), and the rest stays due at once, in
+//   shares of the same size, for the next free workers. On a CPU a batch costs what its requests
+//   cost one by one, and a request is answered when its whole batch is done: one worker taking
+//   all 16 of 16 clients' requests made them wait for all 16 while the other worker finished
+//   early and idled. tests/bench/service_load_bench, 2 workers, 16 clients, max_batch 16: p99
+//   491 ms when only the idle workers shared, 151 ms with this rule (159 ms at max_batch 1; 165
+//   against 141 pairs/s in that run). With a GPU, where batches pay, run one or two workers.
 // Not taken from Triton: preferred batch sizes, priorities, and per-request queue policies.
 //
 // Completion: a callback, called exactly once on a worker's thread (or on Stop's or an Enqueue's
@@ -334,23 +334,28 @@ class DynamicBatcher {
           now = absl::Now();
           DropStaleFrontLocked(now, &dropped);
           if (queue_.empty()) {
-            split_due_ = false;
+            split_left_ = 0;
             if (!dropped.empty()) break;  // answer them outside the lock, then wait again
             if (stopping_) return;
             continue;
           }
-          if (static_cast<int>(queue_.size()) >= options_.max_batch || stopping_ || split_due_) {
+          if (static_cast<int>(queue_.size()) >= options_.max_batch || stopping_ ||
+              split_left_ > 0) {
             break;
           }
           const absl::Time dispatch_at = queue_.front().enqueued + options_.max_queue_delay;
           if (now >= dispatch_at) break;
           work_cv_.wait_until(lock, absl::ToChronoTime(dispatch_at));
         }
-        // This worker's share of what is due: the idle workers, itself included, split it.
-        const int idle = std::max(1, options_.workers - busy_workers_);
-        const int due = std::min(options_.max_batch, static_cast<int>(queue_.size()));
-        const int share = (due + idle - 1) / idle;
-        while (!queue_.empty() && static_cast<int>(batch.size()) < share) {
+        // This worker's share of what is due, split once among every worker, busy or not (see
+        // the header); the rest of a split stays due at once, in shares of the same size.
+        if (split_left_ == 0) {
+          const int due = std::min(options_.max_batch, static_cast<int>(queue_.size()));
+          split_left_ = due;
+          split_share_ = (due + options_.workers - 1) / options_.workers;
+        }
+        int taken = 0;
+        while (!queue_.empty() && static_cast<int>(batch.size()) < split_share_) {
           Entry& front = queue_.front();
           if (IsStale(front, now)) {
             dropped.push_back(std::move(front));
@@ -358,9 +363,9 @@ class DynamicBatcher {
             batch.push_back(std::move(front));
           }
           queue_.pop_front();
+          ++taken;
         }
-        // The rest of a split is due at once for the next idle worker.
-        split_due_ = idle > 1 && !queue_.empty() && share < due;
+        split_left_ = queue_.empty() ? 0 : std::max(0, split_left_ - taken);
         ReportDepthLocked();
         if (!batch.empty()) ++busy_workers_;
         // What is left needs another worker's timer (or a worker at once when full).
@@ -425,8 +430,10 @@ class DynamicBatcher {
   std::condition_variable work_cv_;
   std::deque<Entry> queue_;  // guarded by mu_
   bool stopping_ = false;    // guarded by mu_
-  bool split_due_ = false;   // guarded by mu_: the queue's front is the due rest of a split
-  int busy_workers_ = 0;     // guarded by mu_
+  // Guarded by mu_: requests at the queue's front still due from a split, and each worker's share.
+  int split_left_ = 0;
+  int split_share_ = 0;
+  int busy_workers_ = 0;  // guarded by mu_
 
   std::mutex stop_mu_;    // serialises Stop()
   bool stopped_ = false;  // guarded by stop_mu_

@@ -413,7 +413,7 @@ TEST(DynamicBatcherTest, WorkersRunTheirInitOnTheirOwnThreadAndShareTheQueue) {
   EXPECT_GE(batch_threads.size(), 2u);  // several workers took batches
 }
 
-// A due batch is shared among idle workers: with two idle, a full queue of 16 runs as two batches
+// A due batch is shared among the workers: with two idle, a full queue of 16 runs as two batches
 // of 8 at once, not one of 16 while the other worker idles; the rest of a split does not wait for
 // the queue delay again (it is 60 s here).
 TEST(DynamicBatcherTest, IdleWorkersShareADueBatch) {
@@ -451,6 +451,36 @@ TEST(DynamicBatcherTest, IdleWorkersShareADueBatch) {
   EXPECT_EQ(batches[1].size(), 8u);
   std::lock_guard<std::mutex> lock(mu);
   EXPECT_EQ(threads.size(), 2u);
+  batcher->Stop();
+}
+
+// A busy worker keeps its share: with one of two workers blocked in a batch, the free one takes
+// 8 of 16 due requests at a time, not all 16 (whose members would all wait for the whole batch).
+TEST(DynamicBatcherTest, BusyWorkersKeepTheirShareSoBatchesStayShort) {
+  DynamicBatcherOptions options;
+  options.workers = 2;
+  options.max_batch = 16;
+  options.max_queue_delay = absl::Seconds(60);
+  GatedSquarer gated;
+  auto batcher = MakeBatcher(options, gated.Function());
+  std::vector<std::future<absl::StatusOr<int>>> futures;
+  for (int i = 0; i < 16; ++i) futures.push_back(batcher->Submit(i));
+  gated.WaitUntilBusy();  // one worker holds 8 of them in its blocked batch
+  auto wait_until_seen = [&](size_t count) {
+    const absl::Time give_up = absl::Now() + absl::Seconds(30);
+    while (gated.recorder().seen().size() < count && absl::Now() < give_up) {
+      absl::SleepFor(absl::Milliseconds(1));
+    }
+    return gated.recorder().seen().size();
+  };
+  ASSERT_EQ(wait_until_seen(8), 8u);  // the other worker ran its 8
+  for (int i = 16; i < 32; ++i) futures.push_back(batcher->Submit(i));
+  // The free worker runs the next 16 as two batches of 8 while the other is still blocked.
+  EXPECT_EQ(wait_until_seen(24), 24u);
+  gated.Release();
+  for (auto& future : futures) EXPECT_TRUE(Get(future).ok());
+  for (const auto& batch : gated.recorder().batches()) EXPECT_LE(batch.size(), 8u);
+  EXPECT_EQ(gated.recorder().seen().size(), 32u);
   batcher->Stop();
 }
 
