@@ -368,7 +368,8 @@ class DynamicBatcher {
         split_left_ = queue_.empty() ? 0 : std::max(0, split_left_ - taken);
         ReportDepthLocked();
         if (!batch.empty()) ++busy_workers_;
-        // What is left needs another worker's timer (or a worker at once when full).
+        // What is left needs another worker: at once when full or left due by a split, else when
+        // its oldest has waited max_queue_delay.
         if (!queue_.empty()) work_cv_.notify_one();
       }
       AnswerDropped(dropped, now);

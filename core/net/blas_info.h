@@ -4,7 +4,7 @@
 // OpenBLAS picks its kernels once, when it is loaded, from the CPU or from OPENBLAS_CORETYPE.
 // On this project's machine (AMD EPYC with AVX-512) OpenBLAS 0.3.21's own choice is its
 // Cooperlake (AVX-512) kernels, but the environment forced OPENBLAS_CORETYPE=Haswell (AVX2),
-// and the network ran 1.4x slower. A figure means little without saying which kernels made it.
+// and the network ran 1.3x slower. A figure means little without saying which kernels made it.
 #ifndef RPSR_CORE_NET_BLAS_INFO_H_
 #define RPSR_CORE_NET_BLAS_INFO_H_
 

@@ -131,7 +131,7 @@ class NetTargetEncoding;  // core/net/rpsr_net.h
 
 // A target's share of the work of registering against it, done once (Registrar::PrepareTarget)
 // for a caller that registers many sources against one target (a reference scan of an object,
-// a map): the network's encoding of the target (a third of an object pair's network time with
+// a map): the network's encoding of the target (about 30% of an object pair's network time with
 // two passes; registrar_bench, BM_RegisterObjectsPreparedTarget). Immutable and safe to share
 // across threads; valid with the Registrar that made it, for the tree it was made from (which
 // must outlive it).

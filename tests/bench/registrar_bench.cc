@@ -12,11 +12,11 @@
 
 #include "benchmark/benchmark.h"
 #include "core/data/object_pairs.h"
-#include "core/net/blas_info.h"
 #include "core/net/rpsr_net.h"
 #include "core/registrar/registrar.h"
 #include "core/synth/lidar_sequence.h"
 #include "tests/bench/bench_clouds.h"
+#include "tests/bench/blas_benchmark_main.h"
 
 namespace rpsr::core {
 namespace {
@@ -129,12 +129,4 @@ BENCHMARK(BM_RegisterLidar)
 }  // namespace
 }  // namespace rpsr::core
 
-// The BLAS kernels decide much of the network's time: name them in the benchmark's header.
-int main(int argc, char** argv) {
-  benchmark::AddCustomContext("blas", rpsr::core::net::BlasDescription());
-  benchmark::Initialize(&argc, argv);
-  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
-  benchmark::RunSpecifiedBenchmarks();
-  benchmark::Shutdown();
-  return 0;
-}
+RPSR_BENCHMARK_MAIN_WITH_BLAS();

@@ -10,10 +10,10 @@
 
 #include "benchmark/benchmark.h"
 #include "core/data/object_pairs.h"
-#include "core/net/blas_info.h"
 #include "core/net/rpsr_net.h"
 #include "core/synth/lidar_sequence.h"
 #include "tests/bench/bench_clouds.h"
+#include "tests/bench/blas_benchmark_main.h"
 
 namespace rpsr::core {
 namespace {
@@ -82,12 +82,4 @@ BENCHMARK(BM_NetLidar)->ArgName("batch")->Arg(1)->Arg(16)->Unit(benchmark::kMill
 }  // namespace
 }  // namespace rpsr::core
 
-// The BLAS kernels decide much of the network's time: name them in the benchmark's header.
-int main(int argc, char** argv) {
-  benchmark::AddCustomContext("blas", rpsr::core::net::BlasDescription());
-  benchmark::Initialize(&argc, argv);
-  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
-  benchmark::RunSpecifiedBenchmarks();
-  benchmark::Shutdown();
-  return 0;
-}
+RPSR_BENCHMARK_MAIN_WITH_BLAS();

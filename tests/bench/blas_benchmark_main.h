@@ -1,0 +1,20 @@
+// BENCHMARK_MAIN for the benchmarks that run the network: the BLAS kernels decide much of its
+// time (core/net/blas_info.h), so the benchmark's header names them (`blas: ...`).
+#ifndef RPSR_TESTS_BENCH_BLAS_BENCHMARK_MAIN_H_
+#define RPSR_TESTS_BENCH_BLAS_BENCHMARK_MAIN_H_
+
+#include "benchmark/benchmark.h"
+#include "core/net/blas_info.h"
+
+#define RPSR_BENCHMARK_MAIN_WITH_BLAS()                                      \
+  int main(int argc, char** argv) {                                          \
+    benchmark::AddCustomContext("blas", rpsr::core::net::BlasDescription()); \
+    benchmark::Initialize(&argc, argv);                                      \
+    if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;        \
+    benchmark::RunSpecifiedBenchmarks();                                     \
+    benchmark::Shutdown();                                                   \
+    return 0;                                                                \
+  }                                                                          \
+  static_assert(true, "a semicolon follows the macro")
+
+#endif  // RPSR_TESTS_BENCH_BLAS_BENCHMARK_MAIN_H_
