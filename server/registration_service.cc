@@ -43,7 +43,8 @@ absl::StatusOr<std::unique_ptr<RegistrationBatcher>> MakeRegistrationBatcher(
   }
   // Shared by the workers.
   auto prepared_targets = std::make_shared<PreparedTargetCache>(
-      registrar, static_cast<size_t>(std::max(0, options.prepared_targets)));
+      registrar, static_cast<size_t>(std::max(0, options.prepared_targets)),
+      static_cast<size_t>(options.prepared_target_bytes));
   auto batch_function = [registrar, metrics, prepared_targets](absl::Span<RegistrationJob> jobs)
       -> absl::StatusOr<std::vector<absl::StatusOr<RegistrationOutcome>>> {
     const absl::Time start = absl::Now();
@@ -52,10 +53,13 @@ absl::StatusOr<std::unique_ptr<RegistrationBatcher>> MakeRegistrationBatcher(
     requests.reserve(jobs.size());
     for (size_t i = 0; i < jobs.size(); ++i) {
       const RegistrationJob& job = jobs[i];
-      if (job.target_from_store && job.options.mode != core::RegistrationMode::kRefine) {
+      if (job.target_from_store) {
         bool hit = false;
-        prepared[i] = prepared_targets->Get(job.target, &hit);
-        if (metrics != nullptr) metrics->RecordPreparedTarget(hit, prepared_targets->size());
+        prepared[i] = prepared_targets->Get(
+            job.target, job.options.mode != core::RegistrationMode::kRefine, &hit);
+        if (metrics != nullptr) {
+          metrics->RecordPreparedTarget(hit, prepared_targets->size(), prepared_targets->bytes());
+        }
       }
       requests.push_back({job.source.get(), job.target.get(), job.options, prepared[i].get()});
     }

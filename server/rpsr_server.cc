@@ -55,6 +55,10 @@ absl::Status ValidateOptions(const ServerOptions& o) {
   if (o.batching.prepared_targets < 0) {
     return invalid("batching.prepared_targets must be >= 0, got ", o.batching.prepared_targets);
   }
+  if (o.batching.prepared_target_bytes > (uint64_t{1} << 40)) {
+    return invalid("batching.prepared_target_bytes must be at most 1 TiB, got ",
+                   o.batching.prepared_target_bytes);
+  }
   if (o.max_points_per_cloud == 0) return invalid("max_points_per_cloud is 0");
   if (o.max_open_streams == 0) return invalid("max_open_streams is 0");
   if (o.max_message_bytes < 1024 || o.max_message_bytes > (1u << 31) - 1) {

@@ -46,9 +46,11 @@ struct BatchingOptions {
   // many workers form small batches.
   int workers = 0;
   int intra_op_threads = 1;
-  // Prepared targets kept for cached clouds registered against again (PreparedTargetCache,
-  // ~100 KB each: 512 are ~50 MB beside the cache's trees); 0: none.
+  // Prepared targets kept for cached clouds registered against again (PreparedTargetCache): at
+  // most this many and this many bytes (beside the cache's trees, cache.max_memory_bytes; an
+  // object's is ~300 KB, a 120k-point scan's ~830 KB, with the network's encoding); 0: none.
   int prepared_targets = 512;
+  uint64_t prepared_target_bytes = uint64_t{64} << 20;
 };
 
 struct ServerOptions {

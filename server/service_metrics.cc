@@ -116,9 +116,14 @@ ServiceMetrics::ServiceMetrics() : registry_(std::make_shared<prometheus::Regist
                           .Add({});
   prepared_targets_ = &prometheus::BuildGauge()
                            .Name("rpsr_prepared_targets")
-                           .Help("Prepared targets kept (about 100 KB each)")
+                           .Help("Prepared targets kept")
                            .Register(r)
                            .Add({});
+  prepared_target_bytes_ = &prometheus::BuildGauge()
+                                .Name("rpsr_prepared_target_bytes")
+                                .Help("Memory of the prepared targets kept, bytes")
+                                .Register(r)
+                                .Add({});
   // The series a dashboard expects exist from the start, at zero.
   for (const char* reason : {"memory_budget", "session_expired", "session_closed", "released"}) {
     evictions_->Add({{"reason", reason}});

@@ -12,6 +12,7 @@
 //   rpsr_cache_bytes / rpsr_cache_clouds / rpsr_sessions   gauges
 //   rpsr_prepared_target_hits_total / _misses_total   counters, targets prepared once and reused
 //   rpsr_prepared_targets                             gauge, prepared targets kept
+//   rpsr_prepared_target_bytes                        gauge, their memory
 //   rpsr_uploaded_points_total                        counter
 //   rpsr_model_loaded                                 gauge, 1 once the model is loaded
 // Exposed by prometheus-cpp's Exposer (server/rpsr_server.cc) on its own port.
@@ -49,9 +50,10 @@ class ServiceMetrics {
   void AddUploadedPoints(double points) { uploaded_points_->Increment(points); }
   void SetModelLoaded(bool loaded) { model_loaded_->Set(loaded ? 1.0 : 0.0); }
   // One look-up of the prepared-target cache (PreparedTargetCache) and its size after it.
-  void RecordPreparedTarget(bool hit, size_t kept) {
+  void RecordPreparedTarget(bool hit, size_t kept, size_t bytes) {
     (hit ? prepared_hits_ : prepared_misses_)->Increment();
     prepared_targets_->Set(static_cast<double>(kept));
+    prepared_target_bytes_->Set(static_cast<double>(bytes));
   }
 
   // Hooks that keep the cache series up to date.
@@ -78,6 +80,7 @@ class ServiceMetrics {
   prometheus::Counter* prepared_hits_;
   prometheus::Counter* prepared_misses_;
   prometheus::Gauge* prepared_targets_;
+  prometheus::Gauge* prepared_target_bytes_;
 };
 
 // The name of a gRPC status code as Prometheus labels and logs show it ("DEADLINE_EXCEEDED").

@@ -231,6 +231,16 @@ absl::StatusOr<std::shared_ptr<const NetTargetEncoding>> RpsrNet::EncodeTarget(
   }
 }
 
+size_t RpsrNet::EncodingBytes(const NetTargetEncoding& encoding) {
+  size_t bytes = sizeof(NetTargetEncoding);
+  for (const torch::Tensor* t :
+       {&encoding.token_com, &encoding.token_empty, &encoding.encoded.embedding,
+        &encoding.encoded.memory, &encoding.encoded.self_attended}) {
+    if (t->defined()) bytes += static_cast<size_t>(t->nbytes());
+  }
+  return bytes;
+}
+
 namespace {
 
 // The batch's target side: packed and encoded here for the pairs without a NetTargetEncoding,

@@ -98,6 +98,8 @@ class RpsrNet {
   // The target's part of Estimate, for reuse across calls (see NetTargetEncoding). Estimates
   // with it equal those without (the same operators on the same rows; the tests compare them).
   absl::StatusOr<std::shared_ptr<const NetTargetEncoding>> EncodeTarget(const Octree& target) const;
+  // Memory an encoding holds (its tensors), for a caller's budget.
+  static size_t EncodingBytes(const NetTargetEncoding& encoding);
 
   // For the trainer (core/net/trainer.cc), which lives beside the implementation.
   struct Impl;

@@ -1,6 +1,7 @@
 #include "core/refine/tree_refinement.h"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -50,43 +51,78 @@ struct RegularizedNode {
   bool planar = false;
 };
 
+// A node's shape as Regularize reads it: the normal of the nearest node on its path to the root
+// (itself first) holding at least min_count points, or none (isotropic).
+struct NodeShape {
+  Eigen::Vector3d normal = Eigen::Vector3d::Zero();
+  bool planar = false;
+};
+
+NodeShape ShapeOf(const Octree& tree, int depth, int node, int min_count) {
+  NodeShape out;
+  int shape_depth = depth;
+  int shape_node = node;
+  while (static_cast<int>(tree.level(shape_depth).count[shape_node]) < min_count &&
+         shape_depth > 0) {
+    shape_node = tree.level(shape_depth).parent[shape_node];
+    --shape_depth;
+  }
+  if (static_cast<int>(tree.level(shape_depth).count[shape_node]) < min_count) return out;
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
+  solver.computeDirect(tree.Covariance(shape_depth, shape_node).cast<double>());
+  out.normal = solver.eigenvectors().col(0);  // eigenvalues ascending
+  out.planar = true;
+  return out;
+}
+
 RegularizedNode Regularize(const Octree& tree, int depth, int node, double edge,
                            const TreeRefinementOptions& options) {
   RegularizedNode out;
   const double edge2 = edge * edge;
   out.iso = edge2;
-  int shape_depth = depth;
-  int shape_node = node;
-  while (static_cast<int>(tree.level(shape_depth).count[shape_node]) <
-             options.min_count_for_covariance &&
-         shape_depth > 0) {
-    shape_node = tree.level(shape_depth).parent[shape_node];
-    --shape_depth;
-  }
-  if (static_cast<int>(tree.level(shape_depth).count[shape_node]) <
-      options.min_count_for_covariance) {
-    return out;
-  }
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
-  solver.computeDirect(tree.Covariance(shape_depth, shape_node).cast<double>());
-  out.normal = solver.eigenvectors().col(0);  // eigenvalues ascending
+  const NodeShape shape = ShapeOf(tree, depth, node, options.min_count_for_covariance);
+  if (!shape.planar) return out;
+  out.normal = shape.normal;
   out.flat = edge2 * (1.0 - options.covariance_epsilon);
   out.planar = true;
   return out;
 }
 
-// The target's side of one depth: a hash from its Morton codes to node indices and its nodes
-// regularised lazily (only those ever matched pay the eigen-decomposition). It depends on the
-// target tree, the depth and the regularisation options alone, so the rounds of a re-binned depth
-// and the registrar's several starts on one pair share it (TreeRefinementCache).
+// The target's side of one depth: a hash from its Morton codes to node indices and its nodes'
+// shapes (the regularisation's epsilon is applied where they are read, so one side serves the
+// coarse and the fine epsilon). It depends on the target tree, the depth and min_count alone, so
+// the rounds of a re-binned depth and the registrar's several starts on one pair share it
+// (TreeRefinementCache), and a PreparedRefinementTarget shares it among pairs and threads.
+// Shapes are computed on first use (only nodes ever matched pay the eigen-decomposition), also
+// when shared: a node's state goes 0 -> 1 (claimed by the one thread that computes it) -> 2 (its
+// shape is written and published); a thread that finds it claimed computes a copy of its own.
 struct TargetDepth {
   int depth = 0;
-  double covariance_epsilon = 0.0;
   int min_count = 0;
   double edge = 0.0;
   absl::flat_hash_map<uint64_t, int32_t> index;
-  std::vector<RegularizedNode> regularized;
-  std::vector<uint8_t> ready;
+  size_t nodes = 0;
+  mutable std::unique_ptr<NodeShape[]> shapes;
+  mutable std::unique_ptr<std::atomic<uint8_t>[]> state;
+
+  // Node j's shape: the published one, or computed now (into `scratch` when another thread is
+  // computing the published one).
+  const NodeShape& Shape(const Octree& target, int j, NodeShape& scratch) const {
+    uint8_t seen = state[j].load(std::memory_order_acquire);
+    if (seen == 2) return shapes[j];
+    if (seen == 0 && state[j].compare_exchange_strong(seen, 1, std::memory_order_acq_rel)) {
+      shapes[j] = ShapeOf(target, depth, j, min_count);
+      state[j].store(2, std::memory_order_release);
+      return shapes[j];
+    }
+    scratch = ShapeOf(target, depth, j, min_count);
+    return scratch;
+  }
+
+  size_t bytes() const {
+    return sizeof(*this) + index.capacity() * (sizeof(std::pair<uint64_t, int32_t>) + 1) +
+           nodes * (sizeof(NodeShape) + sizeof(std::atomic<uint8_t>));
+  }
 };
 
 // The source's side of one depth: the chosen nodes with their regularised covariances and prior
@@ -111,7 +147,7 @@ struct DepthData {
   int depth = 0;
   double edge_target = 0.0;
   const SourceDepth* source = nullptr;
-  TargetDepth* target = nullptr;
+  const TargetDepth* target = nullptr;
   int block_size = 8;
   std::vector<uint64_t> block_home;
   std::vector<uint8_t> block_sides;
@@ -159,29 +195,35 @@ void PrepareSourceDepth(const Octree& source, int depth, const TreeRefinementOpt
   }
 }
 
-// Fills a new (empty) side.
-void PrepareTargetDepth(const Octree& target, int depth, const TreeRefinementOptions& options,
-                        TargetDepth& side) {
+// Fills a new (empty) side: the index now, the shapes on first use.
+void PrepareTargetDepth(const Octree& target, int depth, int min_count, TargetDepth& side) {
   side.depth = depth;
-  side.covariance_epsilon = options.covariance_epsilon;
-  side.min_count = options.min_count_for_covariance;
+  side.min_count = min_count;
   side.edge = EdgeOf(target, depth);
   const Octree::Level& t = target.level(depth);
   side.index.reserve(t.size());
   for (size_t j = 0; j < t.size(); ++j) {
     side.index.emplace(t.morton[j], static_cast<int32_t>(j));
   }
-  side.regularized.assign(t.size(), RegularizedNode{});
-  side.ready.assign(t.size(), 0);
+  side.nodes = t.size();
+  side.shapes = std::make_unique<NodeShape[]>(t.size());
+  side.state = std::make_unique<std::atomic<uint8_t>[]>(t.size());
+  for (size_t j = 0; j < t.size(); ++j) side.state[j].store(0, std::memory_order_relaxed);
 }
 
-DepthData MakeDepthData(const SourceDepth& source, TargetDepth& target,
+// A target side found for a stage, and whether it came from a PreparedRefinementTarget.
+struct TargetSideRef {
+  const TargetDepth* side = nullptr;
+  bool prepared = false;
+};
+
+DepthData MakeDepthData(const SourceDepth& source, TargetSideRef target,
                         const TreeRefinementOptions& options) {
   DepthData data;
-  data.depth = target.depth;
-  data.edge_target = target.edge;
+  data.depth = target.side->depth;
+  data.edge_target = target.side->edge;
   data.source = &source;
-  data.target = &target;
+  data.target = target.side;
   const size_t used = source.nodes.size();
   data.block_size = options.search_27_neighbors ? 27 : 8;
   data.block_home.assign(used, ~uint64_t{0});  // no code: depth <= 21 uses 63 bits
@@ -193,11 +235,27 @@ DepthData MakeDepthData(const SourceDepth& source, TargetDepth& target,
 }  // namespace
 
 // The sides already prepared for one (source, target) pair, found by what they depend on.
+struct PreparedRefinementTarget::Sides {
+  std::vector<TargetDepth> depths;  // coarse to fine
+  int min_count = 0;
+
+  const TargetDepth* Find(int depth, int min_count_wanted) const {
+    if (min_count_wanted != min_count) return nullptr;
+    for (const TargetDepth& side : depths) {
+      if (side.depth == depth) return &side;
+    }
+    return nullptr;
+  }
+};
+
+// The sides already prepared for one (source, target) pair, found by what they depend on.
 struct TreeRefinementCache::Impl {
   const Octree* source = nullptr;
   const Octree* target = nullptr;
   std::vector<std::unique_ptr<SourceDepth>> sources;
   std::vector<std::unique_ptr<TargetDepth>> targets;
+  // Read first when the bound target is its tree.
+  std::shared_ptr<const PreparedRefinementTarget> prepared;
 
   void BindTo(const Octree& s, const Octree& t) {
     if (source == &s && target == &t) return;
@@ -220,20 +278,62 @@ struct TreeRefinementCache::Impl {
     return *sources.back();
   }
 
-  TargetDepth& Target(int depth, const TreeRefinementOptions& o) {
+  TargetSideRef Target(int depth, const TreeRefinementOptions& o) {
+    if (prepared != nullptr && &prepared->tree() == target) {
+      if (const TargetDepth* side = prepared->sides().Find(depth, o.min_count_for_covariance)) {
+        return {side, true};
+      }
+    }
     for (const auto& side : targets) {
-      if (side->depth == depth && side->covariance_epsilon == o.covariance_epsilon &&
-          side->min_count == o.min_count_for_covariance) {
-        return *side;
+      if (side->depth == depth && side->min_count == o.min_count_for_covariance) {
+        return {side.get(), false};
       }
     }
     targets.push_back(std::make_unique<TargetDepth>());
-    PrepareTargetDepth(*target, depth, o, *targets.back());
-    return *targets.back();
+    PrepareTargetDepth(*target, depth, o.min_count_for_covariance, *targets.back());
+    return {targets.back().get(), false};
   }
 };
 
 TreeRefinementCache::TreeRefinementCache() : impl_(std::make_unique<Impl>()) {}
+TreeRefinementCache::TreeRefinementCache(std::shared_ptr<const PreparedRefinementTarget> prepared)
+    : impl_(std::make_unique<Impl>()) {
+  impl_->prepared = std::move(prepared);
+}
+
+PreparedRefinementTarget::PreparedRefinementTarget() = default;
+PreparedRefinementTarget::~PreparedRefinementTarget() = default;
+
+absl::StatusOr<std::shared_ptr<const PreparedRefinementTarget>> PreparedRefinementTarget::Prepare(
+    const Octree& target, const TreeRefinementOptions& options) {
+  if (target.max_depth() < 0 || target.num_points() == 0) {
+    return absl::InvalidArgumentError("PreparedRefinementTarget: the target tree is empty");
+  }
+  if (options.min_count_for_covariance < 0 || options.coarsest_depth > target.max_depth()) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "PreparedRefinementTarget: min_count_for_covariance (", options.min_count_for_covariance,
+        ") must be non-negative and coarsest_depth (", options.coarsest_depth,
+        ") within the tree's depth ", target.max_depth()));
+  }
+  // Every depth a refinement against this target can visit with these options: from the
+  // coarsest (StageDepths' rule) to the tree's deepest (a shallower source stops earlier).
+  const int coarsest =
+      options.coarsest_depth < 0 ? std::min(target.max_depth(), 3) : options.coarsest_depth;
+  std::shared_ptr<PreparedRefinementTarget> prepared(new PreparedRefinementTarget());
+  prepared->tree_ = &target;
+  auto sides = std::make_unique<Sides>();
+  sides->min_count = options.min_count_for_covariance;
+  sides->depths.resize(static_cast<size_t>(target.max_depth() - coarsest + 1));
+  size_t bytes = sizeof(PreparedRefinementTarget) + sizeof(Sides);
+  for (int depth = coarsest; depth <= target.max_depth(); ++depth) {
+    TargetDepth& side = sides->depths[static_cast<size_t>(depth - coarsest)];
+    PrepareTargetDepth(target, depth, options.min_count_for_covariance, side);
+    bytes += side.bytes();
+  }
+  prepared->sides_ = std::move(sides);
+  prepared->bytes_ = bytes;
+  return std::shared_ptr<const PreparedRefinementTarget>(std::move(prepared));
+}
 TreeRefinementCache::~TreeRefinementCache() = default;
 TreeRefinementCache::TreeRefinementCache(TreeRefinementCache&&) noexcept = default;
 TreeRefinementCache& TreeRefinementCache::operator=(TreeRefinementCache&&) noexcept = default;
@@ -361,7 +461,11 @@ Linearization Linearize(const Octree& source, const Octree& target, DepthData& d
   const Octree::Level& s_level = source.level(data.depth);
   double prior_sum = 0.0;
   const SourceDepth& sd = *data.source;
-  TargetDepth& td = *data.target;
+  const TargetDepth& td = *data.target;
+  // The target's regularised covariance, iso * I - flat * n n^T, from its shape (as Regularize).
+  const double target_iso = data.edge_target * data.edge_target;
+  const double target_flat = target_iso * (1.0 - options.covariance_epsilon);
+  NodeShape scratch_shape;
   for (size_t k = 0; k < sd.nodes.size(); ++k) {
     lin.used_count += s_level.count[sd.nodes[k]];
     const Eigen::Vector3d q = R * sd.mean[k] + t;
@@ -396,15 +500,11 @@ Linearization Linearize(const Octree& source, const Octree& target, DepthData& d
   double weight_sum = 0.0;
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
   for (Correspondence& c : corr) {
-    if (!td.ready[c.j]) {
-      td.regularized[c.j] = Regularize(target, data.depth, c.j, data.edge_target, options);
-      td.ready[c.j] = 1;
-    }
-    const RegularizedNode& tn = td.regularized[c.j];
+    const NodeShape& tn = td.Shape(target, c.j, scratch_shape);
     const RegularizedNode& sn = sd.regularized[c.k];
     const Eigen::Vector3d m = R * sn.normal;  // the source's normal in the target frame
-    Eigen::Matrix3d combined = (tn.iso + sn.iso) * Eigen::Matrix3d::Identity();
-    combined.noalias() -= tn.flat * tn.normal * tn.normal.transpose();
+    Eigen::Matrix3d combined = (target_iso + sn.iso) * Eigen::Matrix3d::Identity();
+    if (tn.planar) combined.noalias() -= target_flat * tn.normal * tn.normal.transpose();
     combined.noalias() -= sn.flat * m * m.transpose();
     c.information = combined.inverse();
     const Eigen::Vector3d r = c.target_mean - c.moved;
@@ -764,8 +864,10 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
       // come from the cache (shared with the other rounds and starts).
       std::optional<SourceDepth> rebinned_side;
       if (rebin) PrepareSourceDepth(*rebinned, depth, stage_options, rebinned_side.emplace());
+      const TargetSideRef target_side = shared.Target(depth, stage_options);
+      stage.target_side_prepared = target_side.prepared;
       DepthData data = MakeDepthData(rebin ? *rebinned_side : shared.Source(depth, stage_options),
-                                     shared.Target(depth, stage_options), stage_options);
+                                     target_side, stage_options);
       stage.cell_edge = data.edge_target;
       stage.source_nodes = static_cast<int>(data.source->nodes.size());
       stage.prepare_seconds = SecondsSince(stage_start);

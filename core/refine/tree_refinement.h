@@ -183,6 +183,8 @@ struct DepthStage {
   // Re-binning, regularising the source's nodes, indexing the target's level (near 0 where a
   // TreeRefinementCache already held the last two).
   double prepare_seconds = 0.0;
+  // The target's side came from a PreparedRefinementTarget (not built by this call or its cache).
+  bool target_side_prepared = false;
 };
 
 struct TreeRefinementResult {
@@ -246,9 +248,14 @@ absl::Status ValidateTreeRefinement(const Octree& source, const Octree& target,
 // of a LiDAR refinement's time). Bound to the trees of the call that uses it (by address; a call
 // on other trees starts it afresh), so the trees must stay alive and unchanged while it is used
 // with them. One thread at a time.
+class PreparedRefinementTarget;
+
 class TreeRefinementCache {
  public:
   TreeRefinementCache();
+  // Reads the target's side from `prepared` when the calls' target is its tree (and the options'
+  // min_count_for_covariance is the one it was prepared with); otherwise prepares it as usual.
+  explicit TreeRefinementCache(std::shared_ptr<const PreparedRefinementTarget> prepared);
   ~TreeRefinementCache();
   TreeRefinementCache(TreeRefinementCache&&) noexcept;
   TreeRefinementCache& operator=(TreeRefinementCache&&) noexcept;
@@ -261,6 +268,41 @@ class TreeRefinementCache {
                                                             const TreeRefinementOptions&,
                                                             TreeRefinementCache&);
   std::unique_ptr<Impl> impl_;
+};
+
+// A target tree's side of the refinement, prepared once for a target that many sources are refined
+// against (a reference scan, a map, a cloud cached by the service): per depth, its cell index
+// (Morton code -> node) now, and its nodes' shapes (the normal each regularised covariance keeps;
+// see TreeRefinementOptions::covariance_epsilon) on first use, published for the calls after it.
+// Without it each refinement builds them for itself (registrar_bench, mode refine: ~0.3 ms of an
+// object pair's 4.4, ~1 ms of a 120k-point scan's 11.7). Preparing costs about what one
+// refinement spends on them, so it pays from the second source on. Results are the same bit for
+// bit. Safe to share across threads (a shape is computed by the one thread that claims it; a
+// thread that finds it being computed computes its own copy). It points at the tree, which must
+// outlive it and stay unchanged.
+class PreparedRefinementTarget {
+ public:
+  // Depths from the options' coarsest (StageDepths' rule) to the tree's deepest, for the options'
+  // min_count_for_covariance (the other options do not matter). InvalidArgument: an empty tree, a
+  // negative min_count_for_covariance, a coarsest_depth beyond the tree.
+  static absl::StatusOr<std::shared_ptr<const PreparedRefinementTarget>> Prepare(
+      const Octree& target, const TreeRefinementOptions& options = {});
+  ~PreparedRefinementTarget();
+  PreparedRefinementTarget(const PreparedRefinementTarget&) = delete;
+  PreparedRefinementTarget& operator=(const PreparedRefinementTarget&) = delete;
+
+  const Octree& tree() const { return *tree_; }
+  // Memory it holds (indexes and shapes), for a caller's budget.
+  size_t bytes() const { return bytes_; }
+
+  struct Sides;  // tree_refinement.cc
+  const Sides& sides() const { return *sides_; }
+
+ private:
+  PreparedRefinementTarget();
+  const Octree* tree_ = nullptr;
+  std::unique_ptr<const Sides> sides_;
+  size_t bytes_ = 0;
 };
 
 // Refines `initial_T_target_source`. Errors (InvalidArgument): a non-finite or non-rigid initial

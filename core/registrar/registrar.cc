@@ -181,9 +181,10 @@ struct Registrar::State {
   ConfidenceModel confidence;
   std::string description;
 
+  // `prepared` (optional): the target's prepared side (its refinement part is used here).
   RegistrationResult Finish(const Octree& source, const Octree& target,
                             const RegistrationOptions& options, const NetOutput* net_output,
-                            Clock::time_point start) const;
+                            const PreparedTarget* prepared, Clock::time_point start) const;
 };
 
 Registrar::Registrar() : state_(std::make_unique<State>()) {}
@@ -257,6 +258,7 @@ std::string Registrar::model_description() const { return state_->description; }
 RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& target,
                                             const RegistrationOptions& options,
                                             const NetOutput* net_output,
+                                            const PreparedTarget* prepared,
                                             Clock::time_point start) const {
   RegistrationResult result;
   result.mode = options.mode;
@@ -282,7 +284,7 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   Eigen::Isometry3d from = initial;
   if (options.mode != RegistrationMode::kRefine) from = result.net_T_target_source;
   if (options.mode == RegistrationMode::kNet) refinement.evaluate_only = true;
-  TreeRefinementCache cache;
+  TreeRefinementCache cache(prepared != nullptr ? prepared->refinement : nullptr);
   absl::StatusOr<TreeRefinementResult> refined =
       RefineWithFallback(source, target, from, refinement, cache);
   double confidence_seconds = 0.0;
@@ -377,18 +379,31 @@ absl::StatusOr<RegistrationResult> Registrar::Register(const Octree& source,
 }
 
 absl::StatusOr<std::shared_ptr<const PreparedTarget>> Registrar::PrepareTarget(
-    const Octree& target) const {
-  // What Register checks of a target for the network's modes.
-  if (absl::Status s = CheckTree(&target, "target", RegistrationMode::kNetRefine); !s.ok()) {
+    const Octree& target, bool for_network) const {
+  // What Register checks of a target for the modes it is prepared for.
+  if (absl::Status s =
+          CheckTree(&target, "target",
+                    for_network ? RegistrationMode::kNetRefine : RegistrationMode::kRefine);
+      !s.ok()) {
     return s;
   }
-  absl::StatusOr<std::shared_ptr<const NetTargetEncoding>> encoding =
-      state_->net->EncodeTarget(target);
-  if (!encoding.ok()) return encoding.status();
   auto prepared = std::make_shared<PreparedTarget>();
   prepared->tree_ = &target;
   prepared->registrar_ = this;
-  prepared->net_encoding = *std::move(encoding);
+  prepared->bytes_ = sizeof(PreparedTarget);
+  if (for_network) {
+    absl::StatusOr<std::shared_ptr<const NetTargetEncoding>> encoding =
+        state_->net->EncodeTarget(target);
+    if (!encoding.ok()) return encoding.status();
+    prepared->net_encoding = *std::move(encoding);
+    prepared->bytes_ += RpsrNet::EncodingBytes(*prepared->net_encoding);
+  }
+  // For the options a request has by default (RegistrationOptions::refinement).
+  absl::StatusOr<std::shared_ptr<const PreparedRefinementTarget>> refinement =
+      PreparedRefinementTarget::Prepare(target, TreeRefinementOptions{});
+  if (!refinement.ok()) return refinement.status();
+  prepared->refinement = *std::move(refinement);
+  prepared->bytes_ += prepared->refinement->bytes();
   return std::shared_ptr<const PreparedTarget>(std::move(prepared));
 }
 
@@ -461,7 +476,8 @@ std::vector<absl::StatusOr<RegistrationResult>> Registrar::RegisterBatch(
     const RegistrationRequest& r = requests[i];
     const auto start = Clock::now();
     results[i] = state_->Finish(*r.source, *r.target, r.options,
-                                UsesNet(r.options.mode) ? &net_outputs[i] : nullptr, start);
+                                UsesNet(r.options.mode) ? &net_outputs[i] : nullptr,
+                                r.prepared_target, start);
   }
   return results;
 }

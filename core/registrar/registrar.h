@@ -130,20 +130,30 @@ struct RegistrationResult {
 class NetTargetEncoding;  // core/net/rpsr_net.h
 
 // A target's share of the work of registering against it, done once (Registrar::PrepareTarget)
-// for a caller that registers many sources against one target (a reference scan of an object,
-// a map): the network's encoding of the target (about 30% of an object pair's network time with
-// two passes; registrar_bench, BM_RegisterObjectsPreparedTarget). Immutable and safe to share
-// across threads; valid with the Registrar that made it, for the tree it was made from (which
-// must outlive it).
+// for a caller that registers many sources against one target (a reference scan of an object, a
+// map, the last frame of a stream): the network's encoding of the target (about 30% of an object
+// pair's network time with two passes; registrar_bench, BM_RegisterObjectsPreparedTarget) and the
+// refinement's target side (PreparedRefinementTarget: its cell indexes and node shapes, ~0.5 ms
+// of an object pair, ~2-3 ms of a LiDAR scan's refinement). Immutable and safe to share across
+// threads; valid with the Registrar that made it, for the tree it was made from (which must
+// outlive it).
 class PreparedTarget {
  public:
   const Octree& tree() const { return *tree_; }
+  // Memory it holds, for a caller's budget (rpsrd's prepared-target cache).
+  size_t bytes() const { return bytes_; }
+  // What was prepared: the network's encoding (null when prepared for mode refine only) and the
+  // refinement's side (for the registrar's default TreeRefinementOptions; a request with another
+  // min_count_for_covariance prepares its own).
+  bool has_net_encoding() const { return net_encoding != nullptr; }
 
  private:
   friend class Registrar;
   const Octree* tree_ = nullptr;
   const void* registrar_ = nullptr;
   std::shared_ptr<const NetTargetEncoding> net_encoding;
+  std::shared_ptr<const PreparedRefinementTarget> refinement;
+  size_t bytes_ = 0;
 };
 
 // One pair of a batch, with its own options (a batch gathers requests of many clients).
@@ -185,8 +195,11 @@ class Registrar {
                                               const RegistrationOptions& options = {}) const;
 
   // Does a target's share of the work once (see PreparedTarget). InvalidArgument for a tree the
-  // network cannot read (as Register would say).
-  absl::StatusOr<std::shared_ptr<const PreparedTarget>> PrepareTarget(const Octree& target) const;
+  // network cannot read (as Register would say). `for_network` false: the refinement's side only
+  // (for mode refine: the network's encoding costs more than a refinement's target side and is
+  // of no use there); such a target serves the network's modes too, encoding the target per call.
+  absl::StatusOr<std::shared_ptr<const PreparedTarget>> PrepareTarget(
+      const Octree& target, bool for_network = true) const;
 
   // One batched forward pass for all network modes' pairs (grouped by passes), then refinement
   // per pair. Results equal Register() pair by pair within the network's batching tolerance

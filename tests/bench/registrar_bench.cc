@@ -108,7 +108,8 @@ BENCHMARK(BM_RegisterObjects)
     ->Arg(static_cast<int>(RegistrationMode::kRefine))
     ->Unit(benchmark::kMillisecond);
 
-// Many sources against one reference: the target's network encoding done once.
+// Many sources against one reference: the target's network encoding and refinement side done
+// once.
 void BM_RegisterObjectsPreparedTarget(benchmark::State& state) {
   RunRegister(state, ObjectTrees(), /*prepared=*/true);
 }
@@ -116,13 +117,53 @@ BENCHMARK(BM_RegisterObjectsPreparedTarget)
     ->ArgName("mode")
     ->Arg(static_cast<int>(RegistrationMode::kNetRefine))
     ->Arg(static_cast<int>(RegistrationMode::kNet))
+    ->Arg(static_cast<int>(RegistrationMode::kRefine))
     ->Unit(benchmark::kMillisecond);
+
+// What preparing a target costs (Registrar::PrepareTarget): arg 1 with the network's encoding,
+// 0 the refinement's side alone (what the service prepares for mode refine).
+void RunPrepare(benchmark::State& state, const TreePairs& trees) {
+  const Registrar& registrar = SharedRegistrar();
+  const bool for_network = state.range(0) != 0;
+  size_t k = 0;
+  double bytes = 0.0;
+  for (auto _ : state) {
+    const size_t i = k++ % trees.size();
+    auto prepared = registrar.PrepareTarget(trees.trees[2 * i + 1], for_network);
+    if (!prepared.ok()) {
+      state.SkipWithError("prepare failed");
+      break;
+    }
+    bytes += static_cast<double>((*prepared)->bytes());
+    benchmark::DoNotOptimize(prepared);
+  }
+  state.counters["KB"] =
+      bytes / 1024.0 / static_cast<double>(std::max<int64_t>(1, state.iterations()));
+}
+void BM_PrepareObjectTarget(benchmark::State& state) { RunPrepare(state, ObjectTrees()); }
+BENCHMARK(BM_PrepareObjectTarget)
+    ->ArgName("network")
+    ->Arg(1)
+    ->Arg(0)
+    ->Unit(benchmark::kMillisecond);
+void BM_PrepareLidarTarget(benchmark::State& state) { RunPrepare(state, LidarTrees()); }
+BENCHMARK(BM_PrepareLidarTarget)->ArgName("network")->Arg(1)->Arg(0)->Unit(benchmark::kMillisecond);
 
 void BM_RegisterLidar(benchmark::State& state) { RunRegister(state, LidarTrees()); }
 BENCHMARK(BM_RegisterLidar)
     ->ArgName("mode")
     ->Arg(static_cast<int>(RegistrationMode::kNetRefine))
     ->Arg(static_cast<int>(RegistrationMode::kNet))
+    ->Arg(static_cast<int>(RegistrationMode::kRefine))
+    ->Unit(benchmark::kMillisecond);
+
+// Many scans against one reference scan (a map, the last frame of a stream).
+void BM_RegisterLidarPreparedTarget(benchmark::State& state) {
+  RunRegister(state, LidarTrees(), /*prepared=*/true);
+}
+BENCHMARK(BM_RegisterLidarPreparedTarget)
+    ->ArgName("mode")
+    ->Arg(static_cast<int>(RegistrationMode::kNetRefine))
     ->Arg(static_cast<int>(RegistrationMode::kRefine))
     ->Unit(benchmark::kMillisecond);
 

@@ -194,6 +194,25 @@ TEST_F(ServerTest, RegistersCachedCloudsAsTheRegistrarDoesInProcess) {
   const Eigen::Isometry3d first = TransformOf(result.transform_target_source());
   EXPECT_EQ(TransformOf(again.result().transform_target_source()).matrix(), first.matrix());
   EXPECT_EQ(again.result().confidence(), result.confidence());
+
+  // Mode refine uses the prepared target's refinement side: the same answer as in process.
+  v1::RegisterOptions refine = options;
+  refine.set_mode("refine");
+  core::RegistrationOptions direct_refine;
+  direct_refine.mode = core::RegistrationMode::kRefine;
+  auto direct_refined = SharedRegistrar()->Register(**source_tree, **target_tree, direct_refine);
+  ASSERT_TRUE(direct_refined.ok());
+  std::vector<Eigen::Isometry3d> answers;
+  for (int call = 0; call < 2; ++call) {
+    v1::RegisterResponse refined;
+    ASSERT_TRUE(client_->RegisterIds(session_, source, target, refine, &refined).ok());
+    EXPECT_EQ(refined.result().mode(), "refine");
+    answers.push_back(TransformOf(refined.result().transform_target_source()));
+    const core::PairError off = core::ErrorOf(answers.back(), direct_refined->T_target_source);
+    EXPECT_LT(off.rotation_deg, 1e-4) << "call " << call;
+    EXPECT_LT(off.translation, 1e-6) << "call " << call;
+  }
+  EXPECT_EQ(answers[0].matrix(), answers[1].matrix());
 }
 
 TEST_F(ServerTest, RegistersInlineCloudsWithoutASession) {
@@ -594,6 +613,7 @@ TEST_F(ServerTest, MetricsEndpointExportsTheSeries) {
   EXPECT_GE(MetricValue(text, "rpsr_prepared_target_misses_total").value_or(0), 1);
   EXPECT_TRUE(MetricValue(text, "rpsr_prepared_target_hits_total").has_value());
   EXPECT_GE(MetricValue(text, "rpsr_prepared_targets").value_or(0), 1);
+  EXPECT_GT(MetricValue(text, "rpsr_prepared_target_bytes").value_or(0), 10000);
 }
 
 // --- servers of their own ------------------------------------------------------------------

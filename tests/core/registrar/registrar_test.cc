@@ -276,6 +276,45 @@ TEST(RegistrarPreparedTargetTest, SameAnswersAndMisuseIsRefused) {
             absl::StatusCode::kInvalidArgument);
 }
 
+// Prepared for the refinement alone (what the service keeps for mode refine): the same answers in
+// every mode (the network then encodes the target per call), less memory than a full one, and a
+// tree too shallow for the network is fine.
+TEST(RegistrarPreparedTargetTest, RefinementOnlyTargetServesEveryMode) {
+  const ObjectPair pair = AsymmetricObjectPair(9, 30.0);
+  const Octree source = TreeOf(pair.source);
+  const Octree target = TreeOf(pair.target);
+  auto full = SharedRegistrar().PrepareTarget(target);
+  auto refinement_only = SharedRegistrar().PrepareTarget(target, /*for_network=*/false);
+  ASSERT_TRUE(full.ok() && refinement_only.ok()) << full.status() << refinement_only.status();
+  EXPECT_TRUE((*full)->has_net_encoding());
+  EXPECT_FALSE((*refinement_only)->has_net_encoding());
+  EXPECT_GT((*refinement_only)->bytes(), target.level(6).size() * sizeof(float) * 3);
+  EXPECT_GT((*full)->bytes(), (*refinement_only)->bytes());
+  for (RegistrationMode mode :
+       {RegistrationMode::kNet, RegistrationMode::kNetRefine, RegistrationMode::kRefine}) {
+    RegistrationOptions options;
+    options.mode = mode;
+    auto plain = SharedRegistrar().Register(source, target, options);
+    auto with = SharedRegistrar().Register(source, **refinement_only, options);
+    ASSERT_TRUE(plain.ok() && with.ok()) << plain.status() << with.status();
+    EXPECT_EQ(plain->T_target_source.matrix(), with->T_target_source.matrix());
+    EXPECT_EQ(plain->confidence, with->confidence);
+  }
+  const Octree shallow_source = TreeOf(pair.source, 4);
+  const Octree shallow_target = TreeOf(pair.target, 4);
+  auto shallow = SharedRegistrar().PrepareTarget(shallow_target, /*for_network=*/false);
+  ASSERT_TRUE(shallow.ok()) << shallow.status();
+  RegistrationOptions refine;
+  refine.mode = RegistrationMode::kRefine;
+  auto plain = SharedRegistrar().Register(shallow_source, shallow_target, refine);
+  auto with = SharedRegistrar().Register(shallow_source, **shallow, refine);
+  ASSERT_TRUE(plain.ok() && with.ok()) << plain.status() << with.status();
+  EXPECT_EQ(plain->T_target_source.matrix(), with->T_target_source.matrix());
+  // The network's modes still refuse a tree it cannot read, prepared or not.
+  EXPECT_EQ(SharedRegistrar().Register(shallow_source, **shallow).status().code(),
+            absl::StatusCode::kInvalidArgument);
+}
+
 TEST(RegistrarInputTest, BadInputsAreInvalidArgumentPerPair) {
   const ObjectPair pair = AsymmetricObjectPair(3, 20.0);
   const Octree good = TreeOf(pair.source);
