@@ -234,7 +234,7 @@ DepthData MakeDepthData(const SourceDepth& source, TargetSideRef target,
 
 }  // namespace
 
-// The sides already prepared for one (source, target) pair, found by what they depend on.
+// A prepared target's sides: one per depth from the coarsest, for one min_count.
 struct PreparedRefinementTarget::Sides {
   std::vector<TargetDepth> depths;  // coarse to fine
   int min_count = 0;
