@@ -121,6 +121,7 @@ void ToProto(const RegisterOptions& in, rpsr::v1::RegisterOptions* out) {
   out->set_deadline_seconds(absl::ToDoubleSeconds(in.server_deadline));
   out->set_refine_from_initial(in.refine_from_initial);
   out->set_search_scene_start(in.search_scene_start);
+  out->set_rebin_coarse_depths(in.rebin_coarse_depths);
 }
 
 double SecondsSince(std::chrono::steady_clock::time_point start) {

@@ -146,6 +146,9 @@ struct RegisterOptions {
   // the network's start is not confident; search a start about z on scene-scale trees.
   bool refine_from_initial = true;
   bool search_scene_start = true;
+  // The refinement's coarse depths on the target's cells (proto RegisterOptions; false: the
+  // source tree's own cells).
+  bool rebin_coarse_depths = true;
   // The gRPC deadline of this call; zero: ClientOptions::default_deadline.
   absl::Duration timeout = absl::ZeroDuration();
 };

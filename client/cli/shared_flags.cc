@@ -49,6 +49,10 @@ ABSL_FLAG(bool, search_scene_start, true,
           "eval, register, odometry, net+refine on scene-scale trees: when the answer is still "
           "below 0.9 confidence, search a start (turns about z, assumed up; shifts of whole "
           "cells) and refine from it too");
+ABSL_FLAG(bool, rebin_coarse_depths, true,
+          "eval, register, odometry (refining modes): the refinement's coarse depths compare the "
+          "source re-binned on the target's cells; false: the source tree's own cells (the "
+          "paper's Eq. 2 as written)");
 ABSL_FLAG(std::string, model, "",
           "eval, calibrate: a weights file (.rpsrw) or the name of a model embedded in the binary "
           "(objects; lidar when shipped); default: the embedded object model");

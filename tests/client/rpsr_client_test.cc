@@ -170,6 +170,13 @@ TEST_F(RpsrClientTest, UploadsInChunksAndRegistersByIds) {
       (*session)->Register(source->cloud_id, target->cloud_id, refine);
   ASSERT_TRUE(refined.ok()) << refined.status();
   EXPECT_EQ(refined->start, "initial");
+  // So does the refinement's switch: the source's own coarse cells take another path.
+  RegisterOptions own_cells = refine;
+  own_cells.rebin_coarse_depths = false;
+  absl::StatusOr<RegistrationResult> on_own_cells =
+      (*session)->Register(source->cloud_id, target->cloud_id, own_cells);
+  ASSERT_TRUE(on_own_cells.ok()) << on_own_cells.status();
+  EXPECT_NE(on_own_cells->T_target_source.matrix(), refined->T_target_source.matrix());
   EXPECT_TRUE((*session)->Release(source->cloud_id).ok());
   // Released: the library refuses the id before asking the server.
   EXPECT_EQ((*session)->Register(source->cloud_id, target->cloud_id).status().code(),

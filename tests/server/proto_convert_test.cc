@@ -63,6 +63,22 @@ TEST(ProtoConvertTest, OptionsDefaultToNetRefineAndCheckRanges) {
   EXPECT_EQ(OptionsFromProto(proto).status().code(), absl::StatusCode::kInvalidArgument);
 }
 
+// The re-binned coarse depths are on unless a client says otherwise.
+TEST(ProtoConvertTest, RebinnedCoarseDepthsAreOnUnlessTurnedOff) {
+  auto options = OptionsFromProto({});
+  ASSERT_TRUE(options.ok());
+  EXPECT_TRUE(options->refinement.rebin_coarse_depths);
+  v1::RegisterOptions proto;
+  proto.set_rebin_coarse_depths(false);
+  options = OptionsFromProto(proto);
+  ASSERT_TRUE(options.ok());
+  EXPECT_FALSE(options->refinement.rebin_coarse_depths);
+  proto.set_rebin_coarse_depths(true);
+  options = OptionsFromProto(proto);
+  ASSERT_TRUE(options.ok());
+  EXPECT_TRUE(options->refinement.rebin_coarse_depths);
+}
+
 // The later starts are on unless a client says otherwise (proto3 optional: absent is not false).
 TEST(ProtoConvertTest, LaterStartsAreOnUnlessTurnedOff) {
   auto options = OptionsFromProto({});
