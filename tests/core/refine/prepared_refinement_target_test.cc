@@ -1,6 +1,7 @@
 // PreparedRefinementTarget: a target's side of the refinement prepared once changes no result
 // (bit for bit, whatever the options, the start or the source), is ignored for other trees, is
 // shared by threads, and refuses what it cannot prepare.
+#include <atomic>
 #include <random>
 #include <thread>
 #include <vector>
@@ -188,25 +189,33 @@ TEST(PreparedRefinementTargetTest, SharedByThreads) {
     ASSERT_TRUE(r.ok());
     expected.push_back(*r);
   }
-  auto prepared = PreparedRefinementTarget::Prepare(target);
-  ASSERT_TRUE(prepared.ok());
+  // Rounds of a fresh prepared target (no shape computed yet) that the threads start on together,
+  // so that they reach the same nodes at about the same time (the ThreadSanitizer build of this
+  // test, prepared_refinement_target_tsan_test, checks the claims and publications).
   constexpr int kThreads = 4;
+  constexpr int kRounds = 3;
   std::vector<std::vector<TreeRefinementResult>> got(kThreads);
-  std::vector<std::thread> threads;
-  for (int k = 0; k < kThreads; ++k) {
-    threads.emplace_back([&, k] {
-      for (int round = 0; round < 3; ++round) {
+  for (int round = 0; round < kRounds; ++round) {
+    auto prepared = PreparedRefinementTarget::Prepare(target);
+    ASSERT_TRUE(prepared.ok());
+    std::atomic<int> waiting{kThreads};
+    std::vector<std::thread> threads;
+    for (int k = 0; k < kThreads; ++k) {
+      threads.emplace_back([&, k] {
+        waiting.fetch_sub(1);
+        while (waiting.load() > 0) {
+        }
         for (size_t i = 0; i < sources.size(); ++i) {
           TreeRefinementCache cache(*prepared);
           auto r = RefineOnTrees(sources[i], target, starts[i], {}, cache);
           if (r.ok()) got[k].push_back(*r);
         }
-      }
-    });
+      });
+    }
+    for (std::thread& t : threads) t.join();
   }
-  for (std::thread& t : threads) t.join();
   for (int k = 0; k < kThreads; ++k) {
-    ASSERT_EQ(got[k].size(), 3 * sources.size()) << "thread " << k;
+    ASSERT_EQ(got[k].size(), kRounds * sources.size()) << "thread " << k;
     for (size_t n = 0; n < got[k].size(); ++n) {
       ExpectSameResult(expected[n % sources.size()], got[k][n],
                        "thread " + std::to_string(k) + " call " + std::to_string(n));
