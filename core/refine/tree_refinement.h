@@ -278,9 +278,9 @@ class TreeRefinementCache {
 // 4.48 -> 4.35 ms on 2,048-point objects, 12.4 -> 11.1 ms on 120k-point scans to depth 9).
 // Preparing builds the indexes only (0.02 ms for an object, 0.08 ms for a scan); the shapes are
 // computed by the first refinement that matches them, so the first source pays what it would
-// have paid anyway. Results are the same bit for bit. Safe to share across threads (a shape is computed by the one thread that claims it; a
-// thread that finds it being computed computes its own copy). It points at the tree, which must
-// outlive it and stay unchanged.
+// have paid anyway. Results are the same bit for bit. Safe to share across threads (a shape is
+// computed by the one thread that claims it; a thread that finds it being computed computes its own
+// copy). It points at the tree, which must outlive it and stay unchanged.
 class PreparedRefinementTarget {
  public:
   // Depths from the options' coarsest (StageDepths' rule) to the tree's deepest, for the options'

@@ -134,8 +134,8 @@ class NetTargetEncoding;  // core/net/rpsr_net.h
 // map, the last frame of a stream): the network's encoding of the target (about 30% of an object
 // pair's network time with two passes; registrar_bench, BM_RegisterObjectsPreparedTarget) and the
 // refinement's target side (PreparedRefinementTarget: its cell indexes and node shapes; ~0.1-0.2
-// ms of an object pair's refinement, ~1.3 ms of a 120k-point scan's). Immutable and safe to share across
-// threads; valid with the Registrar that made it, for the tree it was made from (which must
+// ms of an object pair's refinement, ~1.3 ms of a 120k-point scan's). Immutable and safe to share
+// across threads; valid with the Registrar that made it, for the tree it was made from (which must
 // outlive it).
 class PreparedTarget {
  public:
