@@ -199,7 +199,7 @@ class ServerState {
           "warn", "auth_without_tls",
           {{"detail", "bearer tokens travel in plaintext; enable TLS or terminate it in front"}});
     }
-    if (options_.log_requests) {
+    if (options_.log_lifecycle) {
       LogEvent("info", "listening",
                {{"address", options_.address},
                 {"port", absl::StrCat(port_)},
@@ -220,7 +220,7 @@ class ServerState {
       if (shutting_down_) return;
       shutting_down_ = true;
     }
-    if (options_.log_requests) {
+    if (options_.log_lifecycle) {
       LogEvent("info", "draining", {{"grace_seconds", absl::StrCat(absl::ToDoubleSeconds(grace))}});
     }
     if (service_ != nullptr) service_->StartDraining();
@@ -239,7 +239,7 @@ class ServerState {
     if (janitor_.joinable()) janitor_.join();
     exposer_.reset();
     if (server_ != nullptr) server_->Wait();
-    if (options_.log_requests) LogEvent("info", "stopped", {});
+    if (options_.log_lifecycle) LogEvent("info", "stopped", {});
     shutdown_done_.Notify();
   }
 
@@ -299,7 +299,7 @@ class ServerState {
     service_->SetEngine(std::move(registrar), *std::move(batcher));
     metrics_->SetModelLoaded(true);
     if (!draining()) SetServing(true);
-    if (options_.log_requests) {
+    if (options_.log_lifecycle) {
       LogEvent("info", "model_loaded",
                {{"model", description},
                 {"blas", core::net::BlasDescription()},

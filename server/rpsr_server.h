@@ -99,6 +99,10 @@ struct ServerOptions {
   bool enable_reflection = true;
   // Structured logs (key=value lines on stderr) of each call; off in tests.
   bool log_requests = true;
+  // The server's own events on stderr (listening, model loaded, draining, stopped), independent of
+  // log_requests (an operator who turns the per-call lines off still sees the server start and
+  // stop). Off where a program embeds the server and owns its output (rpsr demo) and in tests.
+  bool log_lifecycle = true;
 };
 
 class ServerState;

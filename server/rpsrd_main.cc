@@ -87,7 +87,9 @@ ABSL_FLAG(absl::Duration, drain_notice, absl::ZeroDuration(),
           "On SIGTERM, how long health says NOT_SERVING (new calls UNAVAILABLE) before the server "
           "stops accepting connections");
 ABSL_FLAG(bool, reflection, true, "Serve gRPC server reflection");
-ABSL_FLAG(bool, log_requests, true, "One log line per call");
+ABSL_FLAG(bool, log_requests, true,
+          "One log line per call (the server's own events -- listening, model loaded, draining, "
+          "stopped -- are logged either way)");
 
 namespace {
 

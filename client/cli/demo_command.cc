@@ -56,6 +56,7 @@ int RunDemoCommand(const std::vector<std::string>& args) {
   server_options.address = "127.0.0.1:0";
   server_options.metrics_address = "";
   server_options.log_requests = false;
+  server_options.log_lifecycle = false;
   server_options.registrar_config = RegistrarConfigFromModelFlag(absl::GetFlag(FLAGS_model));
   absl::StatusOr<std::unique_ptr<server::RunningServer>> running =
       server::StartServer(server_options);

@@ -507,6 +507,7 @@ Measurement MeasureService(std::shared_ptr<const core::Registrar> registrar,
   options.metrics_address = "";
   options.registrar = registrar;
   options.log_requests = false;
+  options.log_lifecycle = false;
   options.batching.max_batch = config.max_batch;
   options.batching.max_queue_delay = config.max_queue_delay;
   options.batching.workers = absl::GetFlag(FLAGS_workers);

@@ -56,6 +56,7 @@ server::ServerOptions TestServerOptions() {
   options.address = "127.0.0.1:0";
   options.metrics_address = "";
   options.log_requests = false;
+  options.log_lifecycle = false;
   return options;
 }
 

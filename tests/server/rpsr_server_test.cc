@@ -49,6 +49,7 @@ ServerOptions TestOptions() {
   options.metrics_address = "";
   options.registrar = SharedRegistrar();
   options.log_requests = false;
+  options.log_lifecycle = false;
   options.max_points_per_cloud = 200'000;
   options.max_message_bytes = 1u << 20;
   options.batching.max_batch = 8;

@@ -9,6 +9,7 @@
 #include <chrono>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
@@ -29,41 +30,74 @@ std::string Field(const std::string& line, const std::string& key) {
   return line.substr(begin, line.find(' ', begin) - begin);
 }
 
-TEST(RpsrdTest, ServesAndDrainsOnSigterm) {
-  int out[2];
-  ASSERT_EQ(pipe(out), 0);
-  const pid_t pid = fork();
-  ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    dup2(out[1], STDERR_FILENO);
-    close(out[0]);
-    execl(RPSRD_PATH, RPSRD_PATH, "--address=127.0.0.1:0", "--metrics_address=", "--max_batch=4",
-          "--max_points_per_cloud=5000", "--drain_notice=200ms", static_cast<char*>(nullptr));
-    _exit(127);
+// rpsrd started with `flags`, its stderr read as it comes.
+class RpsrdProcess {
+ public:
+  explicit RpsrdProcess(std::vector<std::string> flags) {
+    int out[2];
+    if (pipe(out) != 0) return;
+    pid_ = fork();
+    if (pid_ == 0) {
+      dup2(out[1], STDERR_FILENO);
+      close(out[0]);
+      std::vector<char*> argv = {const_cast<char*>(RPSRD_PATH)};
+      for (std::string& flag : flags) argv.push_back(flag.data());
+      argv.push_back(nullptr);
+      execv(RPSRD_PATH, argv.data());
+      _exit(127);
+    }
+    close(out[1]);
+    fd_ = out[0];
   }
-  close(out[1]);
-  std::string log;
-  auto read_until = [&](const std::string& event) {
+  ~RpsrdProcess() {
+    if (fd_ >= 0) close(fd_);
+  }
+
+  bool started() const { return pid_ > 0 && fd_ >= 0; }
+  const std::string& log() const { return log_; }
+
+  // The first line with `event=<event>`, reading until it comes (or 60 s, or the end).
+  std::string ReadUntil(const std::string& event) {
     char buffer[4096];
     const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-    while (log.find("event=" + event) == std::string::npos &&
+    while (log_.find("event=" + event) == std::string::npos &&
            std::chrono::steady_clock::now() < give_up) {
-      const ssize_t n = read(out[0], buffer, sizeof(buffer));
+      const ssize_t n = read(fd_, buffer, sizeof(buffer));
       if (n <= 0) break;
-      log.append(buffer, n);
+      log_.append(buffer, n);
     }
-    const size_t at = log.find("event=" + event);
+    const size_t at = log_.find("event=" + event);
     if (at == std::string::npos) return std::string();
-    const size_t begin = log.rfind('\n', at) == std::string::npos ? 0 : log.rfind('\n', at) + 1;
-    return log.substr(begin, log.find('\n', at) - begin);
-  };
-  const std::string listening = read_until("listening");
+    const size_t begin = log_.rfind('\n', at) == std::string::npos ? 0 : log_.rfind('\n', at) + 1;
+    return log_.substr(begin, log_.find('\n', at) - begin);
+  }
+
+  // SIGTERM; the exit status once it has stopped (-1 if it did not exit normally).
+  int Terminate() {
+    if (kill(pid_, SIGTERM) != 0) return -1;
+    ReadUntil("stopped");
+    int status = 0;
+    if (waitpid(pid_, &status, 0) != pid_ || !WIFEXITED(status)) return -1;
+    return WEXITSTATUS(status);
+  }
+
+ private:
+  pid_t pid_ = -1;
+  int fd_ = -1;
+  std::string log_;
+};
+
+TEST(RpsrdTest, ServesAndDrainsOnSigterm) {
+  RpsrdProcess rpsrd({"--address=127.0.0.1:0", "--metrics_address=", "--max_batch=4",
+                      "--max_points_per_cloud=5000", "--drain_notice=200ms"});
+  ASSERT_TRUE(rpsrd.started());
+  const std::string listening = rpsrd.ReadUntil("listening");
   int port = 0;
-  ASSERT_TRUE(absl::SimpleAtoi(Field(listening, "port"), &port)) << log;
+  ASSERT_TRUE(absl::SimpleAtoi(Field(listening, "port"), &port)) << rpsrd.log();
   // No --workers: one per hardware thread, said in the log and in ServerInfo.
   const uint32_t hardware_threads = std::max(1u, std::thread::hardware_concurrency());
   EXPECT_EQ(Field(listening, "workers"), absl::StrCat(hardware_threads)) << listening;
-  const std::string loaded = read_until("model_loaded");
+  const std::string loaded = rpsrd.ReadUntil("model_loaded");
   EXPECT_THAT(loaded, HasSubstr("RPSRNet"));
   // The BLAS kernels decide the network's speed: the log names them (DEPS.md installs OpenBLAS).
   EXPECT_THAT(loaded, HasSubstr("blas=\"OpenBLAS ")) << loaded;
@@ -78,16 +112,31 @@ TEST(RpsrdTest, ServesAndDrainsOnSigterm) {
   EXPECT_EQ(info.limits().max_points_per_cloud(), 5000u);
   EXPECT_EQ(info.limits().workers(), hardware_threads);
 
-  ASSERT_EQ(kill(pid, SIGTERM), 0);
-  EXPECT_THAT(read_until("stopped"), HasSubstr("level=info"));
-  int status = 0;
-  ASSERT_EQ(waitpid(pid, &status, 0), pid);
-  EXPECT_TRUE(WIFEXITED(status));
-  EXPECT_EQ(WEXITSTATUS(status), 0) << log;
-  EXPECT_THAT(log, HasSubstr("event=signal signal=SIGTERM"));
-  EXPECT_THAT(log, HasSubstr("event=draining"));
-  EXPECT_THAT(log, HasSubstr("method=GetServerInfo code=OK"));
-  close(out[0]);
+  EXPECT_EQ(rpsrd.Terminate(), 0) << rpsrd.log();
+  EXPECT_THAT(rpsrd.log(), HasSubstr("event=stopped"));
+  EXPECT_THAT(rpsrd.log(), HasSubstr("event=signal signal=SIGTERM"));
+  EXPECT_THAT(rpsrd.log(), HasSubstr("event=draining"));
+  EXPECT_THAT(rpsrd.log(), HasSubstr("method=GetServerInfo code=OK"));
+}
+
+// --log_requests=false drops the per-call lines only: an operator still sees the server start,
+// load its model, drain and stop.
+TEST(RpsrdTest, WithoutRequestLogsItStillLogsItsLifecycle) {
+  RpsrdProcess rpsrd({"--address=127.0.0.1:0", "--metrics_address=", "--log_requests=false"});
+  ASSERT_TRUE(rpsrd.started());
+  const std::string listening = rpsrd.ReadUntil("listening");
+  int port = 0;
+  ASSERT_TRUE(absl::SimpleAtoi(Field(listening, "port"), &port)) << rpsrd.log();
+  EXPECT_THAT(rpsrd.ReadUntil("model_loaded"), HasSubstr("RPSRNet")) << rpsrd.log();
+  testing::ServiceTestClient client(absl::StrCat("127.0.0.1:", port));
+  grpc::ClientContext context;
+  client.Prepare(&context);
+  v1::ServerInfo info;
+  ASSERT_TRUE(client.stub().GetServerInfo(&context, {}, &info).ok());
+  EXPECT_EQ(rpsrd.Terminate(), 0) << rpsrd.log();
+  EXPECT_THAT(rpsrd.log(), HasSubstr("event=draining"));
+  EXPECT_THAT(rpsrd.log(), HasSubstr("event=stopped"));
+  EXPECT_THAT(rpsrd.log(), ::testing::Not(HasSubstr("method=GetServerInfo")));
 }
 
 TEST(RpsrdTest, RefusesBadFlagsWithAReason) {
