@@ -205,8 +205,11 @@ if (!rpsrd || !hpa || !flagsMap || !find("PodDisruptionBudget", "rpsrd")) {
   // built), and ~0.5 GiB of LibTorch, the model and buffers.
   const inFlight = Number(flags.get("max_open_streams")) * Number(flags.get("max_points_per_cloud")) * 12;
   check(inFlight > 0, "rpsrd.flags must set --max_open_streams and --max_points_per_cloud (uploads in flight hold their points)");
-  check(budget + inFlight + 2 ** 29 <= bytes(c.resources.limits.memory),
-        `the memory limit ${c.resources.limits.memory} is below the cache budget (${budget}) + uploads in flight (${inFlight}) + 0.5 GiB`);
+  // The prepared targets kept beside the cache (rpsrd's --prepared_target_bytes, 64 MiB unless set).
+  const prepared = Number(flags.get("prepared_target_bytes") ?? 2 ** 26);
+  check(prepared >= 0, "rpsrd.flags: --prepared_target_bytes must be a number of bytes");
+  check(budget + inFlight + prepared + 2 ** 29 <= bytes(c.resources.limits.memory),
+        `the memory limit ${c.resources.limits.memory} is below the cache budget (${budget}) + uploads in flight (${inFlight}) + prepared targets (${prepared}) + 0.5 GiB`);
   check(budget <= bytes(c.resources.requests.memory), `the memory request ${c.resources.requests.memory} is below the cache budget ${budget}`);
   const alerts = YAML.parse(fs.readFileSync(path.join(root, "deploy/prometheus/alerts.yml"), "utf8"));
   const cacheAlert = alerts.groups.flatMap((g) => g.rules).find((r) => r.alert === "RpsrCacheMemoryHigh");
