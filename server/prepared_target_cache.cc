@@ -42,7 +42,9 @@ std::shared_ptr<const core::PreparedTarget> PreparedTargetCache::Get(
         recency_.splice(recency_.begin(), recency_, it->second.recency);
         return it->second.prepared;
       }
-      EraseLocked(key);  // another tree at a freed address, or prepared for refine only
+      // Another tree at a freed address goes now; an entry prepared for refine only stays until
+      // its full replacement is made (a tree the network cannot read keeps it).
+      if (it->second.tree.lock() != tree) EraseLocked(key);
     }
     ++misses_;
   }

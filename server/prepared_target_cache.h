@@ -1,14 +1,14 @@
 // The targets the service prepared (core::Registrar::PrepareTarget), kept for the next pairs
 // against the same cached cloud: a client registering many scans against one reference pays the
-// target's share once (objects, net+refine: 14.1 -> 10.9 ms a pair in registrar_bench; LiDAR
-// refine 11.7 -> 10.8). Bounded by a count and by bytes (BatchingOptions::prepared_targets,
+// target's share once (registrar_bench, interleaved: objects net+refine 14.7 -> 11.6 ms a pair;
+// LiDAR refine 12.4 -> 11.1). Bounded by a count and by bytes (BatchingOptions::prepared_targets,
 // prepared_target_bytes; rpsrd --prepared_targets, --prepared_target_bytes), least recently used
 // out; keyed by the tree, holding it only weakly: a cloud evicted or released from the session
 // store is not kept alive here, and a new tree at a freed one's address is never served the old
 // preparation (the weak pointer has expired). Mode refine needs only the refinement's side
-// (~200 KB for an object, ~740 KB for a 120k-point scan to depth 9), the network's modes the
+// (~200 KB for an object, ~750 KB for a 120k-point scan to depth 9), the network's modes the
 // network's encoding too (~100 KB more): an entry made for refine is prepared again, fully, when
-// a network mode asks for it.
+// a network mode asks for it (and kept if that fails: a tree the network cannot read).
 #ifndef RPSR_SERVER_PREPARED_TARGET_CACHE_H_
 #define RPSR_SERVER_PREPARED_TARGET_CACHE_H_
 

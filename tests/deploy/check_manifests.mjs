@@ -205,8 +205,9 @@ if (!rpsrd || !hpa || !flagsMap || !find("PodDisruptionBudget", "rpsrd")) {
   // built), and ~0.5 GiB of LibTorch, the model and buffers.
   const inFlight = Number(flags.get("max_open_streams")) * Number(flags.get("max_points_per_cloud")) * 12;
   check(inFlight > 0, "rpsrd.flags must set --max_open_streams and --max_points_per_cloud (uploads in flight hold their points)");
-  // The prepared targets kept beside the cache (rpsrd's --prepared_target_bytes, 64 MiB unless set).
-  const prepared = Number(flags.get("prepared_target_bytes") ?? 2 ** 26);
+  // The prepared targets kept beside the cache (rpsrd's --prepared_target_bytes; unless set, its
+  // default: BatchingOptions::prepared_target_bytes in server/rpsr_server.h, 160 MiB).
+  const prepared = Number(flags.get("prepared_target_bytes") ?? 160 * 2 ** 20);
   check(prepared >= 0, "rpsrd.flags: --prepared_target_bytes must be a number of bytes");
   check(budget + inFlight + prepared + 2 ** 29 <= bytes(c.resources.limits.memory),
         `the memory limit ${c.resources.limits.memory} is below the cache budget (${budget}) + uploads in flight (${inFlight}) + prepared targets (${prepared}) + 0.5 GiB`);

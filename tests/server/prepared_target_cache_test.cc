@@ -86,9 +86,14 @@ TEST(PreparedTargetCacheTest, TreesTheNetworkCannotReadGiveNothingForIt) {
   const auto shallow = ObjectTree(1, /*max_depth=*/4);
   EXPECT_EQ(cache.Get(shallow, /*for_network=*/true), nullptr);
   EXPECT_EQ(cache.size(), 0u);
-  // The refinement reads it.
-  EXPECT_NE(cache.Get(shallow, /*for_network=*/false), nullptr);
+  // The refinement reads it; a network mode asking again keeps that entry (no churn).
+  const auto for_refine = cache.Get(shallow, /*for_network=*/false);
+  EXPECT_NE(for_refine, nullptr);
   EXPECT_EQ(cache.size(), 1u);
+  EXPECT_EQ(cache.Get(shallow, /*for_network=*/true), nullptr);
+  bool hit = false;
+  EXPECT_EQ(cache.Get(shallow, /*for_network=*/false, &hit), for_refine);
+  EXPECT_TRUE(hit);
 }
 
 // Mode refine's entries hold the refinement's side only; a network mode on the same tree

@@ -203,6 +203,9 @@ TEST_F(ServerTest, RegistersCachedCloudsAsTheRegistrarDoesInProcess) {
   direct_refine.mode = core::RegistrationMode::kRefine;
   auto direct_refined = SharedRegistrar()->Register(**source_tree, **target_tree, direct_refine);
   ASSERT_TRUE(direct_refined.ok());
+  const double hits_before =
+      MetricValue(ScrapeMetrics(server_->metrics_port()), "rpsr_prepared_target_hits_total")
+          .value_or(-1);
   std::vector<Eigen::Isometry3d> answers;
   for (int call = 0; call < 2; ++call) {
     v1::RegisterResponse refined;
@@ -214,6 +217,10 @@ TEST_F(ServerTest, RegistersCachedCloudsAsTheRegistrarDoesInProcess) {
     EXPECT_LT(off.translation, 1e-6) << "call " << call;
   }
   EXPECT_EQ(answers[0].matrix(), answers[1].matrix());
+  // Both refine calls found the target prepared by the net+refine calls above.
+  EXPECT_EQ(MetricValue(ScrapeMetrics(server_->metrics_port()), "rpsr_prepared_target_hits_total")
+                .value_or(-1),
+            hits_before + 2);
 }
 
 TEST_F(ServerTest, RegistersInlineCloudsWithoutASession) {

@@ -1,6 +1,7 @@
 // The rpsrd binary end to end: it starts with flags, logs key=value lines, serves, and drains and
 // exits 0 on SIGTERM.
 #include <fcntl.h>
+#include <poll.h>
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -30,16 +31,16 @@ std::string Field(const std::string& line, const std::string& key) {
   return line.substr(begin, line.find(' ', begin) - begin);
 }
 
-// rpsrd started with `flags`, its stderr read as it comes.
+// rpsrd started with `flags`, its stderr read as it comes. Never hangs a test: reads wait at most
+// 60 s in all, and a process still running when the helper goes is killed and reaped.
 class RpsrdProcess {
  public:
   explicit RpsrdProcess(std::vector<std::string> flags) {
     int out[2];
-    if (pipe(out) != 0) return;
+    if (pipe2(out, O_CLOEXEC) != 0) return;
     pid_ = fork();
     if (pid_ == 0) {
-      dup2(out[1], STDERR_FILENO);
-      close(out[0]);
+      dup2(out[1], STDERR_FILENO);  // dup2 clears close-on-exec on the copy
       std::vector<char*> argv = {const_cast<char*>(RPSRD_PATH)};
       for (std::string& flag : flags) argv.push_back(flag.data());
       argv.push_back(nullptr);
@@ -47,21 +48,33 @@ class RpsrdProcess {
       _exit(127);
     }
     close(out[1]);
+    if (pid_ < 0) {
+      close(out[0]);
+      return;
+    }
     fd_ = out[0];
   }
   ~RpsrdProcess() {
+    if (pid_ > 0 && !reaped_) {
+      kill(pid_, SIGKILL);
+      waitpid(pid_, nullptr, 0);
+    }
     if (fd_ >= 0) close(fd_);
   }
 
   bool started() const { return pid_ > 0 && fd_ >= 0; }
   const std::string& log() const { return log_; }
 
-  // The first line with `event=<event>`, reading until it comes (or 60 s, or the end).
+  // The first line with `event=<event>`, reading until it comes, the output ends, or 60 s pass.
   std::string ReadUntil(const std::string& event) {
     char buffer[4096];
     const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-    while (log_.find("event=" + event) == std::string::npos &&
-           std::chrono::steady_clock::now() < give_up) {
+    while (fd_ >= 0 && log_.find("event=" + event) == std::string::npos) {
+      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+          give_up - std::chrono::steady_clock::now());
+      if (left.count() <= 0) break;
+      pollfd readable = {fd_, POLLIN, 0};
+      if (poll(&readable, 1, static_cast<int>(left.count())) <= 0) break;
       const ssize_t n = read(fd_, buffer, sizeof(buffer));
       if (n <= 0) break;
       log_.append(buffer, n);
@@ -74,16 +87,22 @@ class RpsrdProcess {
 
   // SIGTERM; the exit status once it has stopped (-1 if it did not exit normally).
   int Terminate() {
-    if (kill(pid_, SIGTERM) != 0) return -1;
+    if (!started() || kill(pid_, SIGTERM) != 0) return -1;
     ReadUntil("stopped");
     int status = 0;
-    if (waitpid(pid_, &status, 0) != pid_ || !WIFEXITED(status)) return -1;
-    return WEXITSTATUS(status);
+    const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (waitpid(pid_, &status, WNOHANG) != pid_) {
+      if (std::chrono::steady_clock::now() > give_up) return -1;  // the destructor kills it
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    reaped_ = true;
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   }
 
  private:
   pid_t pid_ = -1;
   int fd_ = -1;
+  bool reaped_ = false;
   std::string log_;
 };
 
