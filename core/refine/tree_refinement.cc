@@ -207,8 +207,7 @@ void PrepareTargetDepth(const Octree& target, int depth, int min_count, TargetDe
   }
   side.nodes = t.size();
   side.shapes = std::make_unique<NodeShape[]>(t.size());
-  side.state = std::make_unique<std::atomic<uint8_t>[]>(t.size());
-  for (size_t j = 0; j < t.size(); ++j) side.state[j].store(0, std::memory_order_relaxed);
+  side.state = std::make_unique<std::atomic<uint8_t>[]>(t.size());  // value-initialised: all 0
 }
 
 // A target side found for a stage, and whether it came from a PreparedRefinementTarget.

@@ -242,12 +242,12 @@ absl::Status ValidateTreeRefinement(const Octree& source, const Octree& target,
                                     const TreeRefinementOptions& options = {});
 
 // What several RefineOnTrees calls on the same two trees share (the registrar's starts, a
-// re-binned depth's rounds): per depth and regularisation, the target's cell index and its
-// regularised nodes, and the source's own nodes regularised. The values are the same as without
-// it; only the work is done once (the eigen-decompositions of the nodes' shapes were a quarter
-// of a LiDAR refinement's time). Bound to the trees of the call that uses it (by address; a call
-// on other trees starts it afresh), so the trees must stay alive and unchanged while it is used
-// with them. One thread at a time.
+// re-binned depth's rounds): per depth, the target's cell index and its nodes' shapes (or a
+// PreparedRefinementTarget's), and per depth and regularisation the source's own nodes. The values
+// are the same as without it; only the work is done once (the eigen-decompositions of the nodes'
+// shapes were a quarter of a LiDAR refinement's time). Bound to the trees of the call that uses it
+// (by address; a call on other trees starts it afresh), so the trees must stay alive and unchanged
+// while it is used with them. One thread at a time.
 class PreparedRefinementTarget;
 
 class TreeRefinementCache {

@@ -11,33 +11,17 @@
 #include "core/synth/lidar_sequence.h"
 #include "gtest/gtest.h"
 #include "tests/core/refine/refinement_test_geometry.h"
+#include "tests/core/refine/refinement_test_util.h"
 
 namespace rpsr::core {
 namespace {
 
+using testing_util::ExpectSameRefinement;
 using testing_util::Perturbed;
+using testing_util::RefinementTree;
 using testing_util::Sphere;
 
 constexpr double kDeg = M_PI / 180.0;
-
-Octree TreeOf(const PointCloud& cloud, int max_depth) {
-  BarnesHutTreeOptions options;
-  options.max_depth = max_depth;
-  options.neighbor_max_depth = 2;  // refinement reads no neighbour tables
-  auto tree = BuildOctree(cloud, options);
-  EXPECT_TRUE(tree.ok()) << tree.status();
-  return *std::move(tree);
-}
-
-void ExpectSameResult(const TreeRefinementResult& plain, const TreeRefinementResult& prepared,
-                      const std::string& what) {
-  EXPECT_EQ(plain.T_target_source.matrix(), prepared.T_target_source.matrix()) << what;
-  EXPECT_EQ(plain.iterations, prepared.iterations) << what;
-  EXPECT_EQ(plain.fitness, prepared.fitness) << what;
-  EXPECT_EQ(plain.inlier_rmse, prepared.inlier_rmse) << what;
-  EXPECT_EQ(plain.information, prepared.information) << what;
-  EXPECT_EQ(plain.valid, prepared.valid) << what;
-}
 
 struct Call {
   const char* name;
@@ -66,11 +50,11 @@ TEST(PreparedRefinementTargetTest, SameResultsBitForBitAsWithoutIt) {
   auto pair = MakeObjectPair(pair_options, 5);
   auto other = MakeObjectPair(pair_options, 6);
   ASSERT_TRUE(pair.ok() && other.ok());
-  const Octree source = TreeOf(pair->source, 6);
-  const Octree shallow_source = TreeOf(pair->source, 5);
-  const Octree target = TreeOf(pair->target, 6);
-  const Octree other_source = TreeOf(other->source, 6);
-  const Octree other_target = TreeOf(other->target, 6);
+  const Octree source = RefinementTree(pair->source, 6);
+  const Octree shallow_source = RefinementTree(pair->source, 5);
+  const Octree target = RefinementTree(pair->target, 6);
+  const Octree other_source = RefinementTree(other->source, 6);
+  const Octree other_target = RefinementTree(other->target, 6);
   auto prepared = PreparedRefinementTarget::Prepare(target);
   ASSERT_TRUE(prepared.ok()) << prepared.status();
   EXPECT_EQ(&(*prepared)->tree(), &target);
@@ -123,10 +107,10 @@ TEST(PreparedRefinementTargetTest, SameResultsBitForBitAsWithoutIt) {
     auto with_fresh = RefineOnTrees(*c.source, *c.target, c.initial, c.options, fresh);
     auto with_shared = RefineOnTrees(*c.source, *c.target, c.initial, c.options, shared);
     ASSERT_TRUE(plain.ok() && with_fresh.ok() && with_shared.ok()) << c.name;
-    ExpectSameResult(*plain, *with_fresh, c.name);
+    ExpectSameRefinement(*plain, *with_fresh, c.name);
     EXPECT_EQ(EveryStageReadThePreparedSide(*with_fresh), c.uses_prepared) << c.name;
     EXPECT_FALSE(EveryStageReadThePreparedSide(*plain)) << c.name;
-    ExpectSameResult(*plain, *with_shared, std::string(c.name) + " (shared cache)");
+    ExpectSameRefinement(*plain, *with_shared, std::string(c.name) + " (shared cache)");
   }
 }
 
@@ -137,8 +121,8 @@ TEST(PreparedRefinementTargetTest, SameResultOnALidarPair) {
   options.seed = 5;
   auto sequence = LidarSequenceSimulator::Create(options);
   ASSERT_TRUE(sequence.ok()) << sequence.status();
-  const Octree target = TreeOf(sequence->SimulateFrame(0).cloud, 9);
-  const Octree source = TreeOf(sequence->SimulateFrame(2).cloud, 9);
+  const Octree target = RefinementTree(sequence->SimulateFrame(0).cloud, 9);
+  const Octree source = RefinementTree(sequence->SimulateFrame(2).cloud, 9);
   auto prepared = PreparedRefinementTarget::Prepare(target);
   ASSERT_TRUE(prepared.ok()) << prepared.status();
   for (int coarsest : {-1, 5}) {
@@ -148,7 +132,7 @@ TEST(PreparedRefinementTargetTest, SameResultOnALidarPair) {
     TreeRefinementCache cache(*prepared);
     auto with = RefineOnTrees(source, target, Eigen::Isometry3d::Identity(), refine, cache);
     ASSERT_TRUE(plain.ok() && with.ok());
-    ExpectSameResult(*plain, *with, "coarsest " + std::to_string(coarsest));
+    ExpectSameRefinement(*plain, *with, "coarsest " + std::to_string(coarsest));
     EXPECT_TRUE(EveryStageReadThePreparedSide(*with));
     EXPECT_TRUE(with->valid) << with->failure_reason;
   }
@@ -164,7 +148,7 @@ TEST(PreparedRefinementTargetTest, SharedByThreads) {
   pair_options.num_points = 2048;
   auto pair = MakeObjectPair(pair_options, 9);
   ASSERT_TRUE(pair.ok());
-  const Octree target = TreeOf(pair->target, 6);
+  const Octree target = RefinementTree(pair->target, 6);
   // The pair's source and copies of it with a little noise of their own.
   std::vector<Octree> sources;
   std::mt19937_64 noise_rng(1);
@@ -176,7 +160,7 @@ TEST(PreparedRefinementTargetTest, SharedByThreads) {
         p += Eigen::Vector3f(noise(noise_rng), noise(noise_rng), noise(noise_rng));
       }
     }
-    sources.push_back(TreeOf(cloud, 6));
+    sources.push_back(RefinementTree(cloud, 6));
   }
   std::mt19937_64 rng(7);
   std::vector<Eigen::Isometry3d> starts;
@@ -217,8 +201,8 @@ TEST(PreparedRefinementTargetTest, SharedByThreads) {
   for (int k = 0; k < kThreads; ++k) {
     ASSERT_EQ(got[k].size(), kRounds * sources.size()) << "thread " << k;
     for (size_t n = 0; n < got[k].size(); ++n) {
-      ExpectSameResult(expected[n % sources.size()], got[k][n],
-                       "thread " + std::to_string(k) + " call " + std::to_string(n));
+      ExpectSameRefinement(expected[n % sources.size()], got[k][n],
+                           "thread " + std::to_string(k) + " call " + std::to_string(n));
     }
   }
 }
@@ -226,7 +210,7 @@ TEST(PreparedRefinementTargetTest, SharedByThreads) {
 TEST(PreparedRefinementTargetTest, RefusesWhatItCannotPrepare) {
   EXPECT_EQ(PreparedRefinementTarget::Prepare(Octree()).status().code(),
             absl::StatusCode::kInvalidArgument);
-  const Octree tree = TreeOf(Sphere(500, 1), 5);
+  const Octree tree = RefinementTree(Sphere(500, 1), 5);
   TreeRefinementOptions too_deep;
   too_deep.coarsest_depth = 6;
   EXPECT_EQ(PreparedRefinementTarget::Prepare(tree, too_deep).status().code(),

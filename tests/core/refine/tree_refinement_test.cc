@@ -16,26 +16,20 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/core/refine/refinement_test_geometry.h"
+#include "tests/core/refine/refinement_test_util.h"
 
 namespace rpsr::core {
 namespace {
 
 using ::testing::HasSubstr;
 using testing_util::Corridor;
+using testing_util::ExpectSameRefinement;
 using testing_util::Perturbed;
 using testing_util::Plane;
+using testing_util::RefinementTree;
 using testing_util::Sphere;
 
 constexpr double kDeg = M_PI / 180.0;
-
-Octree TreeOf(const PointCloud& cloud, int max_depth) {
-  BarnesHutTreeOptions options;
-  options.max_depth = max_depth;
-  options.neighbor_max_depth = 2;  // refinement reads no neighbour tables
-  auto tree = BuildOctree(cloud, options);
-  EXPECT_TRUE(tree.ok()) << tree.status();
-  return *std::move(tree);
-}
 
 TEST(TreeRefinementTest, ObjectsConvergeFromNetworkSizedErrors) {
   PairOptions pair_options;
@@ -49,8 +43,8 @@ TEST(TreeRefinementTest, ObjectsConvergeFromNetworkSizedErrors) {
     ASSERT_TRUE(pair.ok()) << pair.status();
     if (ShapeFamilies()[pair->family_index].symmetry != RotationalSymmetry::kNone) continue;
     ++tested;
-    const Octree source = TreeOf(pair->source, 6);
-    const Octree target = TreeOf(pair->target, 6);
+    const Octree source = RefinementTree(pair->source, 6);
+    const Octree target = RefinementTree(pair->target, 6);
     const Eigen::Isometry3d initial =
         Perturbed(pair->T_target_source, angle(rng) * kDeg, shift(rng), rng);
     auto result = RefineOnTrees(source, target, initial);
@@ -90,8 +84,8 @@ TEST(TreeRefinementTest, RebinnedCoarseStagesReachTheTruthMoreOften) {
     for (uint64_t seed = 0; seed < 60; ++seed) {
       auto pair = MakeObjectPair(pair_options, 1000 + seed);
       EXPECT_TRUE(pair.ok()) << pair.status();
-      const Octree source = TreeOf(pair->source, 6);
-      const Octree target = TreeOf(pair->target, 6);
+      const Octree source = RefinementTree(pair->source, 6);
+      const Octree target = RefinementTree(pair->target, 6);
       TreeRefinementOptions options;
       options.rebin_coarse_depths = rebin;
       const Eigen::Isometry3d initial =
@@ -125,8 +119,8 @@ TEST(TreeRefinementTest, SimulatedLidarPairFiveFramesApartFromIdentity) {
   const Eigen::Isometry3d truth =
       sequence->T_world_lidar()[0].inverse() * sequence->T_world_lidar()[5];
   ASSERT_GT(truth.translation().norm(), 2.0);  // a real motion, not a near-identity
-  const Octree source = TreeOf(source_cloud, 9);
-  const Octree target = TreeOf(target_cloud, 9);
+  const Octree source = RefinementTree(source_cloud, 9);
+  const Octree target = RefinementTree(target_cloud, 9);
   auto result = RefineOnTrees(source, target, Eigen::Isometry3d::Identity());
   ASSERT_TRUE(result.ok()) << result.status();
   const PairError error = ErrorOf(result->T_target_source, truth);
@@ -147,8 +141,8 @@ class DegenerateGeometryTest : public ::testing::TestWithParam<DegenerateCase> {
 
 TEST_P(DegenerateGeometryTest, ReportedInvalidWithTheUnconstrainedAxes) {
   const DegenerateCase& c = GetParam();
-  const Octree source = TreeOf(c.make(8000, 1), 6);
-  const Octree target = TreeOf(c.make(8000, 2), 6);
+  const Octree source = RefinementTree(c.make(8000, 1), 6);
+  const Octree target = RefinementTree(c.make(8000, 2), 6);
   const Eigen::Isometry3d initial =
       MakeTransform(RotationFromEulerXyz({0.01, -0.01, 0.01}), Eigen::Vector3d(0.01, 0.01, -0.01));
   auto result = RefineOnTrees(source, target, initial);
@@ -175,8 +169,8 @@ TEST(TreeRefinementTest, WellConstrainedObjectIsNotDegenerate) {
   pair_options.num_points = 2048;
   auto pair = MakeObjectPair(pair_options, 1);
   ASSERT_TRUE(pair.ok());
-  auto result =
-      RefineOnTrees(TreeOf(pair->source, 6), TreeOf(pair->target, 6), pair->T_target_source);
+  auto result = RefineOnTrees(RefinementTree(pair->source, 6), RefinementTree(pair->target, 6),
+                              pair->T_target_source);
   ASSERT_TRUE(result.ok());
   EXPECT_EQ(result->num_degenerate, 0) << result->normalized_eigenvalues.transpose();
   // The information matrix is symmetric positive definite.
@@ -185,8 +179,8 @@ TEST(TreeRefinementTest, WellConstrainedObjectIsNotDegenerate) {
 }
 
 TEST(TreeRefinementTest, NoOverlapIsInvalidNotAnError) {
-  const Octree source = TreeOf(Sphere(2000, 1), 6);
-  const Octree target = TreeOf(Sphere(2000, 2), 6);
+  const Octree source = RefinementTree(Sphere(2000, 1), 6);
+  const Octree target = RefinementTree(Sphere(2000, 2), 6);
   const Eigen::Isometry3d far =
       MakeTransform(Eigen::Matrix3d::Identity(), Eigen::Vector3d(100.0, 0.0, 0.0));
   auto result = RefineOnTrees(source, target, far);
@@ -206,8 +200,8 @@ TEST(TreeRefinementTest, DeterministicAndNeedsOnlyTrees) {
     // The clouds go out of scope: refinement sees the trees alone.
     auto pair = MakeObjectPair(pair_options, 5);
     ASSERT_TRUE(pair.ok());
-    source = TreeOf(pair->source, 6);
-    target = TreeOf(pair->target, 6);
+    source = RefinementTree(pair->source, 6);
+    target = RefinementTree(pair->target, 6);
     truth = pair->T_target_source;
   }
   std::mt19937_64 rng(1);
@@ -230,10 +224,10 @@ TEST(TreeRefinementTest, SharedCacheChangesNothing) {
   auto pair = MakeObjectPair(pair_options, 5);
   auto other = MakeObjectPair(pair_options, 6);
   ASSERT_TRUE(pair.ok() && other.ok());
-  const Octree source = TreeOf(pair->source, 6);
-  const Octree target = TreeOf(pair->target, 6);
-  const Octree other_source = TreeOf(other->source, 6);
-  const Octree other_target = TreeOf(other->target, 6);
+  const Octree source = RefinementTree(pair->source, 6);
+  const Octree target = RefinementTree(pair->target, 6);
+  const Octree other_source = RefinementTree(other->source, 6);
+  const Octree other_target = RefinementTree(other->target, 6);
   std::mt19937_64 rng(2);
   TreeRefinementOptions finer;
   finer.coarsest_depth = 4;
@@ -260,11 +254,7 @@ TEST(TreeRefinementTest, SharedCacheChangesNothing) {
     auto fresh = RefineOnTrees(*c.source, *c.target, c.initial, c.options);
     auto shared = RefineOnTrees(*c.source, *c.target, c.initial, c.options, cache);
     ASSERT_TRUE(fresh.ok() && shared.ok()) << i;
-    EXPECT_EQ(fresh->T_target_source.matrix(), shared->T_target_source.matrix()) << "call " << i;
-    EXPECT_EQ(fresh->iterations, shared->iterations) << "call " << i;
-    EXPECT_EQ(fresh->fitness, shared->fitness) << "call " << i;
-    EXPECT_EQ(fresh->information, shared->information) << "call " << i;
-    EXPECT_EQ(fresh->valid, shared->valid) << "call " << i;
+    ExpectSameRefinement(*fresh, *shared, "call " + std::to_string(i));
   }
 }
 
@@ -273,8 +263,8 @@ TEST(TreeRefinementTest, EvaluateOnlyMeasuresWithoutMoving) {
   pair_options.num_points = 2048;
   auto pair = MakeObjectPair(pair_options, 5);
   ASSERT_TRUE(pair.ok());
-  const Octree source = TreeOf(pair->source, 6);
-  const Octree target = TreeOf(pair->target, 6);
+  const Octree source = RefinementTree(pair->source, 6);
+  const Octree target = RefinementTree(pair->target, 6);
   std::mt19937_64 rng(3);
   const Eigen::Isometry3d initial = Perturbed(pair->T_target_source, 10 * kDeg, 0.05, rng);
   auto refined = RefineOnTrees(source, target, initial);
@@ -306,7 +296,7 @@ TEST(TreeRefinementTest, EvaluateOnlyMeasuresWithoutMoving) {
 }
 
 TEST(TreeRefinementTest, RejectsBadInputs) {
-  const Octree tree = TreeOf(Sphere(500, 1), 5);
+  const Octree tree = RefinementTree(Sphere(500, 1), 5);
   EXPECT_EQ(RefineOnTrees(Octree(), tree, Eigen::Isometry3d::Identity()).status().code(),
             absl::StatusCode::kInvalidArgument);
   Eigen::Isometry3d scaled = Eigen::Isometry3d::Identity();
