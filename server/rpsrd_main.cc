@@ -37,7 +37,7 @@ ABSL_FLAG(std::string, address, kDefaults.address,
 ABSL_FLAG(std::string, metrics_address, kDefaults.metrics_address,
           "Prometheus /metrics address host:port; empty disables it");
 ABSL_FLAG(std::string, model, kDefaults.registrar_config.model,
-          "Embedded model to serve (core/models/<name>)");
+          "Embedded model to serve (core/models/<name>: objects, objects-small)");
 ABSL_FLAG(std::string, model_path, "", "Weights file (.rpsrw) instead of an embedded model");
 ABSL_FLAG(std::string, confidence_path, "",
           "Confidence calibration file; empty: the one shipped with the model");

@@ -55,7 +55,7 @@ ABSL_FLAG(bool, rebin_coarse_depths, true,
           "paper's Eq. 2 as written)");
 ABSL_FLAG(std::string, model, "",
           "eval, calibrate: a weights file (.rpsrw) or the name of a model embedded in the binary "
-          "(objects; lidar when shipped); default: the embedded object model");
+          "(objects, objects-small; lidar when shipped); default: the embedded object model");
 ABSL_FLAG(std::string, mode, "net+refine",
           "eval, register, odometry: net: the network alone; net+refine (eval's default): the "
           "network, then the multi-scale GICP on the trees (core/refine); refine: the refinement "

@@ -166,13 +166,14 @@ struct RegistrationRequest {
 };
 
 struct RegistrarConfig {
-  // Which model embedded in the binary (core/models/<name>/): "objects" (the default) or, when
-  // shipped, "lidar". Ignored when model_path is set.
+  // Which model embedded in the binary (core/models/<name>/): "objects" (the default),
+  // "objects-small" (a quarter of its convolution FLOPs) or, when shipped, "lidar". Ignored when
+  // model_path is set.
   std::string model = "objects";
   // Weights (.rpsrw) from a file instead of an embedded model.
   std::string model_path;
   // Calibration of the confidence (see confidence_model.h). Empty: the one shipped beside the
-  // default model.
+  // model (core/models/<name>/confidence.txt, or confidence.txt beside model_path).
   std::string confidence_path;
 };
 

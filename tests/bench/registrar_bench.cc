@@ -2,10 +2,13 @@
 // Registrar::Register for 2,048-point object pairs (trees to depth 6) and 120k-point simulated
 // LiDAR pairs five frames apart (trees to depth 9, ~0.5 m cells), in each mode, and per stage
 // (network, refinement, confidence) as counters. The goal for net+refine: at most 10 ms
-// for objects and 25 ms for LiDAR scans.
+// for objects and 25 ms for LiDAR scans. The *SmallModel rows run the same object pairs through
+// the embedded objects-small model (core/models/objects-small: a quarter of the default's
+// convolution FLOPs) and report an error when it is not embedded.
 //
 //   OMP_WAIT_POLICY=PASSIVE build/tests/bench/registrar_bench --benchmark_counters_tabular=true
 #include <cstdlib>
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -13,6 +16,7 @@
 #include "benchmark/benchmark.h"
 #include "core/data/object_pairs.h"
 #include "core/net/rpsr_net.h"
+#include "core/registrar/embedded_models.h"
 #include "core/registrar/registrar.h"
 #include "core/synth/lidar_sequence.h"
 #include "tests/bench/bench_clouds.h"
@@ -21,15 +25,28 @@
 namespace rpsr::core {
 namespace {
 
+// One registrar per embedded model, made on first use (nullptr when the model is not embedded).
+const Registrar* RegistrarWithModel(const std::string& model) {
+  static std::map<std::string, const Registrar*>* registrars =
+      new std::map<std::string, const Registrar*>();
+  auto it = registrars->find(model);
+  if (it != registrars->end()) return it->second;
+  SetNetThreads(1);
+  RegistrarConfig config;
+  config.model = model;
+  auto created = Registrar::Create(config);
+  const Registrar* registrar = created.ok() ? created->release() : nullptr;
+  registrars->emplace(model, registrar);
+  return registrar;
+}
+
 const Registrar& SharedRegistrar() {
-  static const Registrar* registrar = [] {
-    SetNetThreads(1);
-    auto created = Registrar::Create();
-    if (!created.ok()) std::abort();
-    return created->release();
-  }();
+  const Registrar* registrar = RegistrarWithModel(std::string(kDefaultEmbeddedModel));
+  if (registrar == nullptr) std::abort();
   return *registrar;
 }
+
+constexpr char kSmallModel[] = "objects-small";
 
 struct TreePairs {
   std::vector<Octree> trees;  // source, target, source, target, ...
@@ -62,8 +79,9 @@ const TreePairs& LidarTrees() {
 
 // `prepared`: each target prepared once beforehand (Registrar::PrepareTarget), as a caller that
 // registers many sources against one reference would; the preparation is not timed.
-void RunRegister(benchmark::State& state, const TreePairs& trees, bool prepared = false) {
-  const Registrar& registrar = SharedRegistrar();
+void RunRegister(benchmark::State& state, const TreePairs& trees, bool prepared = false,
+                 const Registrar* model = nullptr) {
+  const Registrar& registrar = model != nullptr ? *model : SharedRegistrar();
   RegistrationOptions options;
   options.mode = static_cast<RegistrationMode>(state.range(0));
   std::vector<std::shared_ptr<const PreparedTarget>> targets;
@@ -118,6 +136,29 @@ BENCHMARK(BM_RegisterObjectsPreparedTarget)
     ->Arg(static_cast<int>(RegistrationMode::kNetRefine))
     ->Arg(static_cast<int>(RegistrationMode::kNet))
     ->Arg(static_cast<int>(RegistrationMode::kRefine))
+    ->Unit(benchmark::kMillisecond);
+
+// The same pairs through the smaller embedded model (its own confidence calibration).
+void RunSmallModel(benchmark::State& state, bool prepared) {
+  const Registrar* small = RegistrarWithModel(kSmallModel);
+  if (small == nullptr) {
+    state.SkipWithError("objects-small is not embedded (core/models/objects-small/model.rpsrw)");
+    return;
+  }
+  RunRegister(state, ObjectTrees(), prepared, small);
+}
+void BM_RegisterObjectsSmallModel(benchmark::State& state) { RunSmallModel(state, false); }
+BENCHMARK(BM_RegisterObjectsSmallModel)
+    ->ArgName("mode")
+    ->Arg(static_cast<int>(RegistrationMode::kNetRefine))
+    ->Arg(static_cast<int>(RegistrationMode::kNet))
+    ->Unit(benchmark::kMillisecond);
+void BM_RegisterObjectsSmallModelPreparedTarget(benchmark::State& state) {
+  RunSmallModel(state, true);
+}
+BENCHMARK(BM_RegisterObjectsSmallModelPreparedTarget)
+    ->ArgName("mode")
+    ->Arg(static_cast<int>(RegistrationMode::kNetRefine))
     ->Unit(benchmark::kMillisecond);
 
 // What preparing a target costs (Registrar::PrepareTarget): arg 1 with the network's encoding,
