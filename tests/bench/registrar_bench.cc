@@ -80,8 +80,7 @@ const TreePairs& LidarTrees() {
 // `prepared`: each target prepared once beforehand (Registrar::PrepareTarget), as a caller that
 // registers many sources against one reference would; the preparation is not timed.
 void RunRegister(benchmark::State& state, const TreePairs& trees, bool prepared = false,
-                 const Registrar* model = nullptr) {
-  const Registrar& registrar = model != nullptr ? *model : SharedRegistrar();
+                 const Registrar& registrar = SharedRegistrar()) {
   RegistrationOptions options;
   options.mode = static_cast<RegistrationMode>(state.range(0));
   std::vector<std::shared_ptr<const PreparedTarget>> targets;
@@ -145,7 +144,7 @@ void RunSmallModel(benchmark::State& state, bool prepared) {
     state.SkipWithError("objects-small is not embedded (core/models/objects-small/model.rpsrw)");
     return;
   }
-  RunRegister(state, ObjectTrees(), prepared, small);
+  RunRegister(state, ObjectTrees(), prepared, *small);
 }
 void BM_RegisterObjectsSmallModel(benchmark::State& state) { RunSmallModel(state, false); }
 BENCHMARK(BM_RegisterObjectsSmallModel)
