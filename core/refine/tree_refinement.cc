@@ -13,10 +13,10 @@
 
 #include "Eigen/Cholesky"
 #include "Eigen/Eigenvalues"
-#include "absl/container/flat_hash_map.h"
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
+#include "core/refine/cell_index.h"
 #include "core/tree/morton.h"
 
 namespace rpsr::core {
@@ -58,29 +58,37 @@ struct NodeShape {
   bool planar = false;
 };
 
-NodeShape ShapeOf(const Octree& tree, int depth, int node, int min_count) {
-  NodeShape out;
-  int shape_depth = depth;
-  int shape_node = node;
-  while (static_cast<int>(tree.level(shape_depth).count[shape_node]) < min_count &&
-         shape_depth > 0) {
-    shape_node = tree.level(shape_depth).parent[shape_node];
-    --shape_depth;
+// The node whose shape `node` reads: the nearest on its path to the root (itself first) holding
+// at least min_count points; {-1, -1} when none does.
+std::pair<int, int> ShapeNodeOf(const Octree& tree, int depth, int node, int min_count) {
+  while (static_cast<int>(tree.level(depth).count[node]) < min_count && depth > 0) {
+    node = tree.level(depth).parent[node];
+    --depth;
   }
-  if (static_cast<int>(tree.level(shape_depth).count[shape_node]) < min_count) return out;
+  if (static_cast<int>(tree.level(depth).count[node]) < min_count) return {-1, -1};
+  return {depth, node};
+}
+
+NodeShape ShapeAt(const Octree& tree, std::pair<int, int> shape_node) {
+  NodeShape out;
+  if (shape_node.first < 0) return out;
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
-  solver.computeDirect(tree.Covariance(shape_depth, shape_node).cast<double>());
+  solver.computeDirect(tree.Covariance(shape_node.first, shape_node.second).cast<double>());
   out.normal = solver.eigenvectors().col(0);  // eigenvalues ascending
   out.planar = true;
   return out;
 }
 
-RegularizedNode Regularize(const Octree& tree, int depth, int node, double edge,
+NodeShape ShapeOf(const Octree& tree, int depth, int node, int min_count) {
+  return ShapeAt(tree, ShapeNodeOf(tree, depth, node, min_count));
+}
+
+// A node's regularised covariance from its shape (the shape's node may be an ancestor).
+RegularizedNode Regularize(const NodeShape& shape, double edge,
                            const TreeRefinementOptions& options) {
   RegularizedNode out;
   const double edge2 = edge * edge;
   out.iso = edge2;
-  const NodeShape shape = ShapeOf(tree, depth, node, options.min_count_for_covariance);
   if (!shape.planar) return out;
   out.normal = shape.normal;
   out.flat = edge2 * (1.0 - options.covariance_epsilon);
@@ -88,7 +96,7 @@ RegularizedNode Regularize(const Octree& tree, int depth, int node, double edge,
   return out;
 }
 
-// The target's side of one depth: a hash from its Morton codes to node indices and its nodes'
+// The target's side of one depth: its cell index (Morton code -> node, cell_index.h) and its nodes'
 // shapes (the regularisation's epsilon is applied where they are read, so one side serves the
 // coarse and the fine epsilon). It depends on the target tree, the depth and min_count alone, so
 // the rounds of a re-binned depth and the registrar's several starts on one pair share it
@@ -100,7 +108,7 @@ struct TargetDepth {
   int depth = 0;
   int min_count = 0;
   double edge = 0.0;
-  absl::flat_hash_map<uint64_t, int32_t> index;
+  CellIndex index;
   size_t nodes = 0;
   mutable std::unique_ptr<NodeShape[]> shapes;
   mutable std::unique_ptr<std::atomic<uint8_t>[]> state;
@@ -120,7 +128,7 @@ struct TargetDepth {
   }
 
   size_t bytes() const {
-    return sizeof(*this) + index.capacity() * (sizeof(std::pair<uint64_t, int32_t>) + 1) +
+    return sizeof(*this) + index.bytes() - sizeof(CellIndex) +
            nodes * (sizeof(NodeShape) + sizeof(std::atomic<uint8_t>));
   }
 };
@@ -178,9 +186,20 @@ void PrepareSourceDepth(const Octree& source, int depth, const TreeRefinementOpt
   side.mean.reserve(used);
   side.regularized.reserve(used);
   side.prior.reserve(used);
+  // Nodes too sparse for a shape read their ancestor's, and siblings are adjacent in the Morton
+  // order: the last shape computed is reused for them (at an object's finest depth most nodes hold
+  // one or two points, and the eigen-decompositions were a sixth of a refinement).
+  std::pair<int, int> last_shape_node = {-2, -2};
+  NodeShape last_shape;
   for (int32_t node : side.nodes) {
     side.mean.push_back(s.center_of_mass[node].cast<double>());
-    side.regularized.push_back(Regularize(source, depth, node, edge_source, options));
+    const std::pair<int, int> shape_node =
+        ShapeNodeOf(source, depth, node, options.min_count_for_covariance);
+    if (shape_node != last_shape_node) {
+      last_shape = ShapeAt(source, shape_node);
+      last_shape_node = shape_node;
+    }
+    side.regularized.push_back(Regularize(last_shape, edge_source, options));
     switch (options.weights) {
       case WeightScheme::kInverseDensity:
         side.prior.push_back(s.inverse_density[node]);
@@ -201,10 +220,7 @@ void PrepareTargetDepth(const Octree& target, int depth, int min_count, TargetDe
   side.min_count = min_count;
   side.edge = EdgeOf(target, depth);
   const Octree::Level& t = target.level(depth);
-  side.index.reserve(t.size());
-  for (size_t j = 0; j < t.size(); ++j) {
-    side.index.emplace(t.morton[j], static_cast<int32_t>(j));
-  }
+  side.index = CellIndex(t.morton, depth);
   side.nodes = t.size();
   side.shapes = std::make_unique<NodeShape[]>(t.size());
   side.state = std::make_unique<std::atomic<uint8_t>[]>(t.size());  // value-initialised: all 0
@@ -382,9 +398,8 @@ int32_t FindPartner(const Octree& target, DepthData& data, size_t k, const Eigen
     const int64_t max_cell = static_cast<int64_t>(cells) - 1;
     auto lookup = [&](int64_t x, int64_t y, int64_t z) -> int32_t {
       if (x < 0 || y < 0 || z < 0 || x > max_cell || y > max_cell || z > max_cell) return -1;
-      const auto it = data.target->index.find(EncodeMorton<3>(
+      return data.target->index.Find(EncodeMorton<3>(
           {static_cast<uint32_t>(x), static_cast<uint32_t>(y), static_cast<uint32_t>(z)}));
-      return it == data.target->index.end() ? -1 : it->second;
     };
     int slot = 0;
     if (block == 27) {

@@ -1,0 +1,87 @@
+// Which node of a tree level occupies a cell: Morton code -> node index, or -1. The refinement's
+// correspondence search asks it for the 8 cells around a moved CoM whenever the CoM changes block
+// (about a fifth of the node visits on 2,048-point objects), so it sits in the refinement's
+// innermost loop.
+//
+// Why two representations: a hash lookup costs ~25 ns (hashing, probing, a random access), and
+// those lookups were over half of the search's time. A level's nodes are listed by strictly
+// ascending Morton code (Octree::Level::morton), so on a level with few cells per node the node's
+// index is simply the code's rank among the occupied cells: one bit per cell plus a running
+// count per 64 cells (1.5 bits a cell) answers with a bit test and a popcount. That costs at most
+// 12 bytes a node when there are at most 64 cells a node (a hash map holds 15-23), so the dense
+// form is taken exactly then (objects to depth 6, a scan's coarse depths) and the hash map on the
+// deep, sparse levels of a scan (its depth 9 has ~130M cells for ~50k nodes). Same answers either
+// way (tests/core/refine/cell_index_test.cc).
+#ifndef RPSR_CORE_REFINE_CELL_INDEX_H_
+#define RPSR_CORE_REFINE_CELL_INDEX_H_
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "absl/container/flat_hash_map.h"
+
+namespace rpsr::core {
+
+class CellIndex {
+ public:
+  // The dense form is taken when the level has at most this many cells per node (or at most
+  // kSmallLevelCells cells in all, where the hash map's fixed costs dominate).
+  static constexpr uint64_t kMaxDenseCellsPerNode = 64;
+  static constexpr uint64_t kSmallLevelCells = uint64_t{1} << 18;  // depth 6 of an octree
+
+  CellIndex() = default;
+  // `codes`: a level's Morton codes, strictly ascending; `depth`: the level's depth (an octree's
+  // 8^depth cells).
+  CellIndex(const std::vector<uint64_t>& codes, int depth) {
+    const uint64_t cells = uint64_t{1} << (3 * depth);
+    const uint64_t nodes = codes.size();
+    dense_ = depth <= 20 && (cells <= kSmallLevelCells || cells <= kMaxDenseCellsPerNode * nodes);
+    if (!dense_) {
+      hash_.reserve(codes.size());
+      for (size_t j = 0; j < codes.size(); ++j) hash_.emplace(codes[j], static_cast<int32_t>(j));
+      return;
+    }
+    const size_t words = static_cast<size_t>((cells + 63) / 64);
+    occupied_.assign(words, 0);
+    for (uint64_t code : codes) occupied_[code >> 6] |= uint64_t{1} << (code & 63);
+    rank_.resize(words);
+    int32_t before = 0;
+    for (size_t w = 0; w < words; ++w) {
+      rank_[w] = before;
+      before += __builtin_popcountll(occupied_[w]);
+    }
+  }
+
+  // The node at `code`, or -1 when the cell is empty (or outside the level).
+  int32_t Find(uint64_t code) const {
+    if (!dense_) {
+      const auto it = hash_.find(code);
+      return it == hash_.end() ? -1 : it->second;
+    }
+    const uint64_t word = code >> 6;
+    if (word >= occupied_.size()) return -1;
+    const uint64_t bits = occupied_[word];
+    const uint64_t bit = uint64_t{1} << (code & 63);
+    if ((bits & bit) == 0) return -1;
+    return rank_[word] + __builtin_popcountll(bits & (bit - 1));
+  }
+
+  bool dense() const { return dense_; }
+
+  size_t bytes() const {
+    return sizeof(*this) + occupied_.capacity() * sizeof(uint64_t) +
+           rank_.capacity() * sizeof(int32_t) +
+           hash_.capacity() * (sizeof(std::pair<uint64_t, int32_t>) + 1);
+  }
+
+ private:
+  bool dense_ = false;
+  std::vector<uint64_t> occupied_;  // bit (code & 63) of word (code >> 6): the cell is occupied
+  std::vector<int32_t> rank_;       // occupied cells in the words before
+  absl::flat_hash_map<uint64_t, int32_t> hash_;
+};
+
+}  // namespace rpsr::core
+
+#endif  // RPSR_CORE_REFINE_CELL_INDEX_H_

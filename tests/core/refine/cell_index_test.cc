@@ -1,0 +1,90 @@
+// CellIndex: the refinement's Morton code -> node lookup gives the same answers in its dense
+// (rank bitset) and hashed forms, on real tree levels and at the edges of the code range.
+#include "core/refine/cell_index.h"
+
+#include <algorithm>
+#include <cstdint>
+#include <random>
+#include <vector>
+
+#include "core/data/object_pairs.h"
+#include "core/tree/bh_tree.h"
+#include "core/tree/morton.h"
+#include "gtest/gtest.h"
+
+namespace rpsr::core {
+namespace {
+
+// Every code of the level finds its node; every other code of a sample (and the codes around
+// each occupied one) finds nothing.
+void ExpectIndexes(const CellIndex& index, const std::vector<uint64_t>& codes, int depth) {
+  const uint64_t cells = uint64_t{1} << (3 * depth);
+  for (size_t j = 0; j < codes.size(); ++j) {
+    ASSERT_EQ(index.Find(codes[j]), static_cast<int32_t>(j)) << "code " << codes[j];
+  }
+  std::mt19937_64 rng(depth);
+  std::vector<uint64_t> probes = {0, cells - 1, cells, cells + 64, ~uint64_t{0}};
+  for (uint64_t code : codes) {
+    probes.push_back(code + 1);
+    if (code > 0) probes.push_back(code - 1);
+  }
+  for (int i = 0; i < 2000; ++i) probes.push_back(rng() % cells);
+  for (uint64_t probe : probes) {
+    const auto it = std::lower_bound(codes.begin(), codes.end(), probe);
+    const int32_t expected =
+        (it != codes.end() && *it == probe) ? static_cast<int32_t>(it - codes.begin()) : -1;
+    ASSERT_EQ(index.Find(probe), expected) << "probe " << probe;
+  }
+}
+
+TEST(CellIndexTest, DenseAndHashedFormsAgreeOnEveryDepthOfAnObjectTree) {
+  PairOptions pair_options;
+  pair_options.num_points = 2048;
+  auto pair = MakeObjectPair(pair_options, /*seed=*/3);
+  ASSERT_TRUE(pair.ok()) << pair.status();
+  BarnesHutTreeOptions options;
+  options.max_depth = 8;
+  auto tree = BuildOctree(pair->target, options);
+  ASSERT_TRUE(tree.ok()) << tree.status();
+  int dense = 0, hashed = 0;
+  for (int depth = 0; depth <= tree->max_depth(); ++depth) {
+    const std::vector<uint64_t>& codes = tree->level(depth).morton;
+    const CellIndex index(codes, depth);
+    // 2,048 points: dense through depth 6 (at most 2^18 cells), and beyond while a node has at
+    // most 64 cells; depth 8 (16.7M cells for ~2,000 nodes) is hashed.
+    if (index.dense())
+      ++dense;
+    else
+      ++hashed;
+    SCOPED_TRACE(testing::Message() << "depth " << depth << (index.dense() ? " dense" : " hashed"));
+    ExpectIndexes(index, codes, depth);
+  }
+  EXPECT_GE(dense, 7);
+  EXPECT_GE(hashed, 1);
+  EXPECT_FALSE(CellIndex(tree->level(8).morton, 8).dense());
+  EXPECT_TRUE(CellIndex(tree->level(6).morton, 6).dense());
+}
+
+TEST(CellIndexTest, FullAndEmptyLevels) {
+  // Every cell of depth 2 occupied: the last word's ranks reach 63.
+  std::vector<uint64_t> all(64);
+  for (uint64_t c = 0; c < 64; ++c) all[c] = c;
+  const CellIndex full(all, 2);
+  ASSERT_TRUE(full.dense());
+  ExpectIndexes(full, all, 2);
+  const CellIndex empty(std::vector<uint64_t>{}, 3);
+  EXPECT_EQ(empty.Find(0), -1);
+  EXPECT_EQ(empty.Find(511), -1);
+  // A sparse deep level is hashed and answers the same way.
+  const std::vector<uint64_t> sparse = {EncodeMorton<3>({1, 2, 3}), EncodeMorton<3>({500, 7, 9}),
+                                        EncodeMorton<3>({511, 511, 511})};
+  std::vector<uint64_t> sorted = sparse;
+  std::sort(sorted.begin(), sorted.end());
+  const CellIndex deep(sorted, 9);
+  EXPECT_FALSE(deep.dense());
+  ExpectIndexes(deep, sorted, 9);
+  EXPECT_GT(deep.bytes(), sizeof(CellIndex));
+}
+
+}  // namespace
+}  // namespace rpsr::core
