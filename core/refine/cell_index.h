@@ -49,7 +49,7 @@ class CellIndex {
     int32_t before = 0;
     for (size_t w = 0; w < words; ++w) {
       rank_[w] = before;
-      before += __builtin_popcountll(occupied_[w]);
+      before += PopCount(occupied_[w]);
     }
   }
 
@@ -64,7 +64,7 @@ class CellIndex {
     const uint64_t bits = occupied_[word];
     const uint64_t bit = uint64_t{1} << (code & 63);
     if ((bits & bit) == 0) return -1;
-    return rank_[word] + __builtin_popcountll(bits & (bit - 1));
+    return rank_[word] + PopCount(bits & (bit - 1));
   }
 
   bool dense() const { return dense_; }
@@ -76,6 +76,15 @@ class CellIndex {
   }
 
  private:
+  // Bits set in x. Inline: the build targets baseline x86-64 (no POPCNT instruction), where
+  // __builtin_popcountll is a call into libgcc's table lookup.
+  static int32_t PopCount(uint64_t x) {
+    x = x - ((x >> 1) & 0x5555555555555555ull);
+    x = (x & 0x3333333333333333ull) + ((x >> 2) & 0x3333333333333333ull);
+    x = (x + (x >> 4)) & 0x0f0f0f0f0f0f0f0full;
+    return static_cast<int32_t>((x * 0x0101010101010101ull) >> 56);
+  }
+
   bool dense_ = false;
   std::vector<uint64_t> occupied_;  // bit (code & 63) of word (code >> 6): the cell is occupied
   std::vector<int32_t> rank_;       // occupied cells in the words before

@@ -112,10 +112,18 @@ struct TargetDepth {
   size_t nodes = 0;
   mutable std::unique_ptr<NodeShape[]> shapes;
   mutable std::unique_ptr<std::atomic<uint8_t>[]> state;
+  // The side of depth - 1 (same tree and min_count) when its owner holds one: a node too sparse
+  // for a shape reads its parent's there (ShapeOf walks up the same way, so the value is the
+  // same), and siblings share one eigen-decomposition instead of one each (at an object's finest
+  // depth most nodes hold one or two points).
+  const TargetDepth* coarser = nullptr;
 
   // Node j's shape: the published one, or computed now (into `scratch` when another thread is
   // computing the published one).
   const NodeShape& Shape(const Octree& target, int j, NodeShape& scratch) const {
+    if (coarser != nullptr && static_cast<int>(target.level(depth).count[j]) < min_count) {
+      return coarser->Shape(target, target.level(depth).parent[j], scratch);
+    }
     uint8_t seen = state[j].load(std::memory_order_acquire);
     if (seen == 2) return shapes[j];
     if (seen == 0 && state[j].compare_exchange_strong(seen, 1, std::memory_order_acq_rel)) {
@@ -305,8 +313,14 @@ struct TreeRefinementCache::Impl {
       }
     }
     targets.push_back(std::make_unique<TargetDepth>());
-    PrepareTargetDepth(*target, depth, o.min_count_for_covariance, *targets.back());
-    return {targets.back().get(), false};
+    TargetDepth& made = *targets.back();
+    PrepareTargetDepth(*target, depth, o.min_count_for_covariance, made);
+    for (const auto& side : targets) {  // link neighbouring depths, in whichever order they came
+      if (side->min_count != made.min_count) continue;
+      if (side->depth == depth - 1) made.coarser = side.get();
+      if (side->depth == depth + 1) side->coarser = &made;
+    }
+    return {&made, false};
   }
 };
 
@@ -343,6 +357,7 @@ absl::StatusOr<std::shared_ptr<const PreparedRefinementTarget>> PreparedRefineme
   for (int depth = coarsest; depth <= target.max_depth(); ++depth) {
     TargetDepth& side = sides->depths[static_cast<size_t>(depth - coarsest)];
     PrepareTargetDepth(target, depth, options.min_count_for_covariance, side);
+    if (depth > coarsest) side.coarser = &sides->depths[static_cast<size_t>(depth - coarsest - 1)];
     bytes += side.bytes();
   }
   prepared->sides_ = std::move(sides);
@@ -360,9 +375,11 @@ struct Correspondence {
   int32_t j = 0;                                    // target node
   Eigen::Vector3d moved = Eigen::Vector3d::Zero();  // T * mu_s
   Eigen::Vector3d target_mean = Eigen::Vector3d::Zero();
-  Eigen::Matrix3d information = Eigen::Matrix3d::Zero();  // (C_t + R C_s R^T)^-1
-  double weight = 0.0;                                    // normalised prior * robust weight
-  double robust = 0.0;                                    // robust weight alone
+  // (C_t + R C_s R^T)^-1; left uninitialised by the search pass (which fills ~a thousand of these
+  // per linearisation), written by the next.
+  Eigen::Matrix3d information;
+  double weight = 0.0;  // normalised prior * robust weight
+  double robust = 0.0;  // robust weight alone
 };
 
 // The nearest target CoM to `q` (the moved CoM of source entry k) among the target cells of the
@@ -485,7 +502,7 @@ Linearization Linearize(const Octree& source, const Octree& target, DepthData& d
     const Eigen::Vector3d q = R * sd.mean[k] + t;
     const int32_t j = FindPartner(target, data, k, q, max_d2);
     if (j < 0) continue;
-    Correspondence c;
+    Correspondence& c = corr.emplace_back();
     c.k = static_cast<int32_t>(k);
     c.j = j;
     c.moved = q;
@@ -493,7 +510,6 @@ Linearization Linearize(const Octree& source, const Octree& target, DepthData& d
     c.weight = sd.prior[k];
     if (options.weights == WeightScheme::kInverseDensity) c.weight *= t_level.inverse_density[j];
     prior_sum += c.weight;
-    corr.push_back(c);
   }
   lin.correspondences = static_cast<int>(corr.size());
   const double c2 =
