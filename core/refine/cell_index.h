@@ -5,16 +5,20 @@
 //
 // Why two representations: a hash lookup costs ~25 ns (hashing, probing, a random access), and
 // those lookups were over half of the search's time. A level's nodes are listed by strictly
-// ascending Morton code (Octree::Level::morton), so on a level with few cells per node the node's
-// index is simply the code's rank among the occupied cells: one bit per cell plus a running
-// count per 64 cells (1.5 bits a cell) answers with a bit test and a popcount. That costs at most
-// 12 bytes a node when there are at most 64 cells a node (a hash map holds 15-23), so the dense
-// form is taken exactly then (objects to depth 6, a scan's coarse depths) and the hash map on the
-// deep, sparse levels of a scan (its depth 9 has ~130M cells for ~50k nodes). Same answers either
-// way (tests/core/refine/cell_index_test.cc).
+// ascending Morton code (Octree::Level::morton), so a node's index is simply its code's rank among
+// the occupied cells: one bit per cell plus a running count per 64 cells (1.5 bits a cell)
+// answers with a bit test and a popcount. Memory decides the form: with at most 64 cells a node
+// that is at most 12 bytes a node (a hash map holds ~17 per slot, 15-23 a node), and a level of
+// at most 2^18 cells (an octree's depths 0-6) costs at most 48 KB whatever its nodes; otherwise
+// (a scan's deep, sparse levels: its depth 9 has ~130M cells for ~50k nodes) the hash map. So an
+// object's depths 3-6 (dense by the size clause, ~55 KB in all; a sparse object's depth 6 holds
+// more than its hash map would) and a scan's coarse depths are dense. Same answers either way
+// (tests/core/refine/cell_index_test.cc).
 #ifndef RPSR_CORE_REFINE_CELL_INDEX_H_
 #define RPSR_CORE_REFINE_CELL_INDEX_H_
 
+#include <algorithm>
+#include <cassert>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -34,9 +38,14 @@ class CellIndex {
   // `codes`: a level's Morton codes, strictly ascending; `depth`: the level's depth (an octree's
   // 8^depth cells).
   CellIndex(const std::vector<uint64_t>& codes, int depth) {
+    assert(depth >= 0 && depth <= 21);  // Morton codes of an octree fit 21 depths (morton.h)
     const uint64_t cells = uint64_t{1} << (3 * depth);
+    // The dense form writes bit `code`: codes must be below 8^depth (and ascending for the ranks).
+    assert(std::is_sorted(codes.begin(), codes.end()) &&
+           std::adjacent_find(codes.begin(), codes.end()) == codes.end() &&
+           (codes.empty() || codes.back() < cells));
     const uint64_t nodes = codes.size();
-    dense_ = depth <= 20 && (cells <= kSmallLevelCells || cells <= kMaxDenseCellsPerNode * nodes);
+    dense_ = cells <= kSmallLevelCells || cells <= kMaxDenseCellsPerNode * nodes;
     if (!dense_) {
       hash_.reserve(codes.size());
       for (size_t j = 0; j < codes.size(); ++j) hash_.emplace(codes[j], static_cast<int32_t>(j));
@@ -77,7 +86,7 @@ class CellIndex {
 
  private:
   // Bits set in x. Inline: the build targets baseline x86-64 (no POPCNT instruction), where
-  // __builtin_popcountll is a call into libgcc's table lookup.
+  // __builtin_popcountll is a call per lookup (into libgcc, through the PLT) to this same sequence.
   static int32_t PopCount(uint64_t x) {
     x = x - ((x >> 1) & 0x5555555555555555ull);
     x = (x & 0x3333333333333333ull) + ((x >> 2) & 0x3333333333333333ull);

@@ -375,18 +375,17 @@ struct Correspondence {
   int32_t j = 0;                                    // target node
   Eigen::Vector3d moved = Eigen::Vector3d::Zero();  // T * mu_s
   Eigen::Vector3d target_mean = Eigen::Vector3d::Zero();
-  // (C_t + R C_s R^T)^-1; left uninitialised by the search pass (which fills ~a thousand of these
-  // per linearisation), written by the next.
-  Eigen::Matrix3d information;
-  double weight = 0.0;  // normalised prior * robust weight
-  double robust = 0.0;  // robust weight alone
+  Eigen::Matrix3d information = Eigen::Matrix3d::Zero();  // (C_t + R C_s R^T)^-1
+  double weight = 0.0;                                    // normalised prior * robust weight
+  double robust = 0.0;                                    // robust weight alone
 };
 
 // The nearest target CoM to `q` (the moved CoM of source entry k) among the target cells of the
 // block around q's cell, within max_distance; -1 when none. The block's node indices are cached
 // per source entry and looked up again only when q moves to another block: after the first
-// iterations of a depth the updates are small, so the hash lookups (random memory accesses, most
-// of the cost) are mostly skipped. The answer is the same as without the cache.
+// iterations of a depth the updates are small, so the cell-index lookups (CellIndex: random
+// memory accesses, most of the cost when they were all hash lookups) are mostly skipped. The answer
+// is the same as without the cache.
 int32_t FindPartner(const Octree& target, DepthData& data, size_t k, const Eigen::Vector3d& q,
                     double max_distance2) {
   const int depth = data.depth;

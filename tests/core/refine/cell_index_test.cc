@@ -37,7 +37,7 @@ void ExpectIndexes(const CellIndex& index, const std::vector<uint64_t>& codes, i
   }
 }
 
-TEST(CellIndexTest, DenseAndHashedFormsAgreeOnEveryDepthOfAnObjectTree) {
+TEST(CellIndexTest, EveryDepthOfAnObjectTreeFindsItsNodesDenseOrHashed) {
   PairOptions pair_options;
   pair_options.num_points = 2048;
   auto pair = MakeObjectPair(pair_options, /*seed=*/3);
@@ -50,8 +50,8 @@ TEST(CellIndexTest, DenseAndHashedFormsAgreeOnEveryDepthOfAnObjectTree) {
   for (int depth = 0; depth <= tree->max_depth(); ++depth) {
     const std::vector<uint64_t>& codes = tree->level(depth).morton;
     const CellIndex index(codes, depth);
-    // 2,048 points: dense through depth 6 (at most 2^18 cells), and beyond while a node has at
-    // most 64 cells; depth 8 (16.7M cells for ~2,000 nodes) is hashed.
+    // 2,048 points: dense through depth 6 (at most 2^18 cells); depths 7 and 8 (2.1M and 16.7M
+    // cells for ~2,000 nodes, far more than 64 a node) are hashed.
     if (index.dense())
       ++dense;
     else
@@ -59,10 +59,24 @@ TEST(CellIndexTest, DenseAndHashedFormsAgreeOnEveryDepthOfAnObjectTree) {
     SCOPED_TRACE(testing::Message() << "depth " << depth << (index.dense() ? " dense" : " hashed"));
     ExpectIndexes(index, codes, depth);
   }
-  EXPECT_GE(dense, 7);
-  EXPECT_GE(hashed, 1);
+  EXPECT_EQ(dense, 7);
+  EXPECT_EQ(hashed, 2);
   EXPECT_FALSE(CellIndex(tree->level(8).morton, 8).dense());
   EXPECT_TRUE(CellIndex(tree->level(6).morton, 6).dense());
+}
+
+TEST(CellIndexTest, ADeepLevelWithAtMost64CellsANodeIsDense) {
+  // Depth 7 (2^21 cells) with every 64th cell occupied: 32,768 nodes, exactly 64 cells a node.
+  std::vector<uint64_t> every_64th;
+  for (uint64_t c = 5; c < (uint64_t{1} << 21); c += 64) every_64th.push_back(c);
+  const CellIndex dense(every_64th, 7);
+  EXPECT_TRUE(dense.dense());
+  ExpectIndexes(dense, every_64th, 7);
+  // One node fewer: more than 64 cells a node, hashed, the same answers.
+  every_64th.pop_back();
+  const CellIndex hashed(every_64th, 7);
+  EXPECT_FALSE(hashed.dense());
+  ExpectIndexes(hashed, every_64th, 7);
 }
 
 TEST(CellIndexTest, FullAndEmptyLevels) {
