@@ -888,7 +888,10 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
       Eigen::Matrix3d stage_R = rebin ? Eigen::Matrix3d::Identity() : R;
       Eigen::Vector3d stage_t = rebin ? Eigen::Vector3d::Zero() : t;
       TreeRefinementOptions stage_options = options;
-      if (rebin) stage_options.covariance_epsilon = options.coarse_covariance_epsilon;
+      if (rebin) {
+        stage_options.covariance_epsilon = options.coarse_covariance_epsilon;
+        stage_options.weights = options.coarse_weights;
+      }
       // Re-binned cells are new at every round; the source's own cells and the target's side
       // come from the cache (shared with the other rounds and starts).
       std::optional<SourceDepth> rebinned_side;
