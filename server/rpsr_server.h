@@ -48,9 +48,9 @@ struct BatchingOptions {
   int intra_op_threads = 1;
   // Prepared targets kept for cached clouds registered against again (PreparedTargetCache): at
   // most this many and this many bytes (beside the cache's trees, cache.max_memory_bytes; an
-  // object's is ~300 KB, a 120k-point scan's ~850 KB, with the network's encoding); 0: none.
+  // object's is ~260 KB, a 120k-point scan's ~890 KB, with the network's encoding); 0: none.
   // 160 MiB holds 512 objects' (service_load_bench cycles through 256 targets: an LRU smaller than
-  // that would serve none) or ~190 scans'.
+  // that would serve none) or ~185 scans'.
   int prepared_targets = 512;
   uint64_t prepared_target_bytes = uint64_t{160} << 20;
 };

@@ -60,7 +60,7 @@ ABSL_FLAG(int, workers, kBatching.workers,
 ABSL_FLAG(int, intra_op_threads, kBatching.intra_op_threads, "LibTorch threads per worker");
 ABSL_FLAG(int, prepared_targets, kBatching.prepared_targets,
           "Prepared targets kept at most, for cached clouds registered against again (an "
-          "object's ~300 KB, a 120k-point scan's ~850 KB); 0: none");
+          "object's ~260 KB, a 120k-point scan's ~890 KB); 0: none");
 ABSL_FLAG(uint64_t, prepared_target_bytes, kBatching.prepared_target_bytes,
           "Memory of the prepared targets kept at most, in bytes (beside --cache_memory_bytes); "
           "0: none");

@@ -11,8 +11,8 @@
 // that is at most 12 bytes a node (a hash map holds ~17 per slot, 15-23 a node), and a level of
 // at most 2^18 cells (an octree's depths 0-6) costs at most 48 KB whatever its nodes; otherwise
 // (a scan's deep, sparse levels: its depth 9 has ~130M cells for ~50k nodes) the hash map. So an
-// object's depths 3-6 (dense by the size clause, ~55 KB in all; a sparse object's depth 6 holds
-// more than its hash map would) and a scan's coarse depths are dense. Same answers either way
+// object's depths 3-6 are dense by the size clause (~55 KB in all, more than the hash map on a
+// sparse object's depth 6), and so are a scan's coarse depths. Same answers either way
 // (tests/core/refine/cell_index_test.cc).
 #ifndef RPSR_CORE_REFINE_CELL_INDEX_H_
 #define RPSR_CORE_REFINE_CELL_INDEX_H_
