@@ -122,6 +122,7 @@ void ToProto(const RegisterOptions& in, rpsr::v1::RegisterOptions* out) {
   out->set_refine_from_initial(in.refine_from_initial);
   out->set_search_scene_start(in.search_scene_start);
   out->set_rebin_coarse_depths(in.rebin_coarse_depths);
+  out->set_joint_finest_stage(in.joint_finest_stage);
 }
 
 double SecondsSince(std::chrono::steady_clock::time_point start) {

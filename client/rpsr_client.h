@@ -149,6 +149,8 @@ struct RegisterOptions {
   // The refinement's coarse depths on the target's cells (proto RegisterOptions; false: the
   // source tree's own cells).
   bool rebin_coarse_depths = true;
+  // With it, the finest stage also fits the next coarser depth (proto RegisterOptions).
+  bool joint_finest_stage = true;
   // The gRPC deadline of this call; zero: ClientOptions::default_deadline.
   absl::Duration timeout = absl::ZeroDuration();
 };

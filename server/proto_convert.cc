@@ -100,6 +100,9 @@ absl::StatusOr<core::RegistrationOptions> OptionsFromProto(const v1::RegisterOpt
   if (proto.has_rebin_coarse_depths()) {
     options.refinement.rebin_coarse_depths = proto.rebin_coarse_depths();
   }
+  if (proto.has_joint_finest_stage()) {
+    options.refinement.joint_finest_stage = proto.joint_finest_stage();
+  }
   return options;
 }
 

@@ -76,6 +76,7 @@ absl::StatusOr<PairReport> RegisterOnServer(const core::PointCloud& source,
   register_options.refine_from_initial = absl::GetFlag(FLAGS_refine_from_initial);
   register_options.search_scene_start = absl::GetFlag(FLAGS_search_scene_start);
   register_options.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
+  register_options.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);
   absl::StatusOr<RegistrationResult> result =
       (*session)->Register(source.points, target.points, register_options);
   if (!result.ok()) return result.status();
@@ -130,6 +131,7 @@ int RunRegisterCommand(const std::vector<std::string>& args) {
     options.also_refine_from_initial = absl::GetFlag(FLAGS_refine_from_initial);
     options.search_scene_start = absl::GetFlag(FLAGS_search_scene_start);
     options.refinement.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
+    options.refinement.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);
     report = RegisterWithRegistrar(**registrar, *source, *target, tree_depth, options);
   }
   if (!report.ok()) return Fail(kFailure, std::string(report.status().message()));

@@ -53,6 +53,10 @@ ABSL_FLAG(bool, rebin_coarse_depths, true,
           "eval, register, odometry (refining modes): the refinement's coarse depths compare the "
           "source re-binned on the target's cells; false: the source tree's own cells (the "
           "paper's Eq. 2 as written)");
+ABSL_FLAG(bool, joint_finest_stage, true,
+          "eval, register, odometry (refining modes, with --rebin_coarse_depths): the "
+          "refinement's finest stage also fits the next coarser depth re-binned on the target's "
+          "cells; false: the finest depth alone");
 ABSL_FLAG(std::string, model, "",
           "eval, calibrate: a weights file (.rpsrw) or the name of a model embedded in the binary "
           "(objects, objects-small; lidar when shipped); default: the embedded object model");

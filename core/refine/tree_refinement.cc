@@ -470,6 +470,15 @@ struct Linearization {
   // unmatched node counting the kernel's ceiling c^2 (and the target's mean inverse density), so
   // that costs under different correspondence sets compare.
   double cost = 0.0;
+  // A joint stage's coarser depth (TreeRefinementOptions::joint_finest_stage): its H, b and cost
+  // about the same `center`, added to the above for the step; zero otherwise. The statistics
+  // above (and the information the result reports) stay the finest depth's own.
+  Matrix6d coarser_H = Matrix6d::Zero();
+  Vector6d coarser_b = Vector6d::Zero();
+  double coarser_cost = 0.0;
+  int coarser_correspondences = 0;
+
+  double step_cost() const { return cost + coarser_cost; }
 };
 
 double FitnessOf(const Linearization& lin) {
@@ -480,9 +489,12 @@ double InlierRmseOf(const Linearization& lin) {
   return lin.inlier_count > 0 ? std::sqrt(lin.inlier_sq_sum / lin.inlier_count) : 0.0;
 }
 
+// `fixed_center`: express H and b about this point instead of the matched centroid (a joint
+// stage's coarser depth uses the finest depth's, so that the two systems add).
 Linearization Linearize(const Octree& source, const Octree& target, DepthData& data,
                         const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
-                        const TreeRefinementOptions& options, std::vector<Correspondence>& corr) {
+                        const TreeRefinementOptions& options, std::vector<Correspondence>& corr,
+                        const Eigen::Vector3d* fixed_center = nullptr) {
   Linearization lin;
   corr.clear();
   const double max_d = options.max_correspondence_distance_cells * data.edge_target;
@@ -554,7 +566,7 @@ Linearization Linearize(const Octree& source, const Octree& target, DepthData& d
     }
   }
   if (!(weight_sum > 0.0)) return lin;
-  lin.center = centroid / weight_sum;
+  lin.center = fixed_center != nullptr ? *fixed_center : centroid / weight_sum;
   // H += J^T W J and b += J^T W r with J = [[a]x, -I] (a = moved CoM about the centre) and
   // W = weight * information, written out in 3x3 blocks: with Q = [a]x W, J^T W J is
   // [[-Q [a]x, Q], [Q^T, W]] and J^T W r is [(W r) x a, -W r] (about a third of the products of
@@ -727,6 +739,37 @@ constexpr double kRebinAgainCells = 0.25;
 // A re-binned depth d is built from the source's nodes at depth min(finest, d + this).
 constexpr int kRebinFromDepthsBelow = 3;
 
+// The coarser depth of a joint finest stage: the source re-binned on the target's cells of
+// depth finest - 1 at the stage's starting pose (R0, t0), so a pose (R, t) moves those cells by
+// (R R0^T, t - R R0^T t0).
+struct CoarserDepth {
+  const Octree* cells = nullptr;  // the re-binned source
+  DepthData data;
+  TreeRefinementOptions options;  // the re-binned depths' epsilon and weights
+  Eigen::Matrix3d R0 = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d t0 = Eigen::Vector3d::Zero();
+  std::vector<Correspondence> corr;
+};
+
+// The finest depth's linearisation at (R, t), with the coarser depth's share added when the stage
+// is joint.
+Linearization LinearizeStage(const Octree& source, const Octree& target, DepthData& data,
+                             const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
+                             const TreeRefinementOptions& options,
+                             std::vector<Correspondence>& corr, CoarserDepth* coarser) {
+  Linearization lin = Linearize(source, target, data, R, t, options, corr);
+  if (coarser == nullptr || lin.correspondences == 0) return lin;
+  const Eigen::Matrix3d dR = R * coarser->R0.transpose();
+  const Eigen::Vector3d dt = t - dR * coarser->t0;
+  const Linearization c = Linearize(*coarser->cells, target, coarser->data, dR, dt,
+                                    coarser->options, coarser->corr, &lin.center);
+  lin.coarser_H = c.H;
+  lin.coarser_b = c.b;
+  lin.coarser_cost = c.cost;
+  lin.coarser_correspondences = c.correspondences;
+  return lin;
+}
+
 struct StageOutcome {
   Linearization lin;      // at the last iterate (the final transform at the finest depth)
   bool singular = false;  // the normal equations had no solution
@@ -738,26 +781,28 @@ struct StageOutcome {
 // iteration oscillated between two correspondence sets and stopped wherever the budget ran out).
 // The returned linearisation is at the final transform: it feeds the information matrix, fitness
 // and RMSE.
+// `coarser` (joint finest stage, else null): its share enters every step and cost comparison.
 StageOutcome RunStage(const Octree& source, const Octree& target, DepthData& data, bool is_finest,
                       const TreeRefinementOptions& options, std::vector<Correspondence>& corr,
                       Eigen::Matrix3d& R, Eigen::Vector3d& t, DepthStage& stage,
-                      TreeRefinementResult& result) {
+                      TreeRefinementResult& result, CoarserDepth* coarser = nullptr) {
   StageOutcome outcome;
   // A coarser depth only has to hand the next one an error well inside a cell: looser test.
   const double loosen = is_finest ? 1.0 : options.coarse_epsilon_factor;
   const double rotation_epsilon = loosen * options.rotation_epsilon_rad;
   const double translation_epsilon = loosen * options.translation_epsilon_cells * data.edge_target;
   Linearization& lin = outcome.lin;
-  lin = Linearize(source, target, data, R, t, options, corr);
+  lin = LinearizeStage(source, target, data, R, t, options, corr, coarser);
   stage.correspondences = lin.correspondences;
+  stage.coarser_correspondences = lin.coarser_correspondences;
   if (options.evaluate_only) return outcome;
   double damping = options.damping;
   for (int iteration = 0; iteration < options.max_iterations_per_depth; ++iteration) {
     if (lin.correspondences < options.min_correspondences) break;
-    Matrix6d H = lin.H;
+    Matrix6d H = lin.H + lin.coarser_H;
     const double mean_diag = H.diagonal().mean();
     H.diagonal().array() += damping * mean_diag;
-    const Vector6d delta = H.ldlt().solve(-lin.b);
+    const Vector6d delta = H.ldlt().solve(-(lin.b + lin.coarser_b));
     if (!delta.allFinite() || !(mean_diag > 0)) {
       outcome.singular = true;
       return outcome;
@@ -773,9 +818,11 @@ StageOutcome RunStage(const Octree& source, const Octree& target, DepthData& dat
     ++stage.iterations;
     ++result.iterations;
     const bool small = angle < rotation_epsilon && v.norm() < translation_epsilon;
-    Linearization next = Linearize(source, target, data, next_R, next_t, options, corr);
+    Linearization next =
+        LinearizeStage(source, target, data, next_R, next_t, options, corr, coarser);
     if (options.step_control && is_finest &&
-        (next.cost > lin.cost || next.correspondences < options.min_correspondences)) {
+        (next.step_cost() > lin.step_cost() ||
+         next.correspondences < options.min_correspondences)) {
       // Uphill (or losing the overlap): stay, damp harder. A step this small that still climbs
       // means the minimum is here.
       damping = std::max(damping, 1e-6) * 10.0;
@@ -789,6 +836,7 @@ StageOutcome RunStage(const Octree& source, const Octree& target, DepthData& dat
     t = next_t;
     lin = std::move(next);
     stage.correspondences = lin.correspondences;
+    stage.coarser_correspondences = lin.coarser_correspondences;
     damping = std::max(damping * 0.1, options.damping);
     stage.last_update_rotation_rad = angle;
     stage.last_update_translation = v.norm();
@@ -855,6 +903,12 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
   std::vector<Correspondence> corr;
   bool all_converged = true;
   Linearization final_lin;
+  // The last round of depth finest - 1 on re-binned cells: the joint finest stage's coarser depth
+  // (TreeRefinementOptions::joint_finest_stage), with the pose it was re-binned at.
+  std::optional<Octree> last_cells;
+  std::optional<SourceDepth> last_side;
+  Eigen::Matrix3d last_R0 = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d last_t0 = Eigen::Vector3d::Zero();
   // Measuring only visits the finest depth (and the fitness depth below).
   for (int depth = options.evaluate_only ? finest : coarsest; depth <= finest; ++depth) {
     const bool is_finest = depth == finest;
@@ -903,8 +957,31 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
       stage.cell_edge = data.edge_target;
       stage.source_nodes = static_cast<int>(data.source->nodes.size());
       stage.prepare_seconds = SecondsSince(stage_start);
-      const StageOutcome outcome = RunStage(stage_source, target, data, is_finest, stage_options,
-                                            corr, stage_R, stage_t, stage, result);
+      // The joint finest stage's coarser depth: the cells the last round of depth finest - 1 was
+      // re-binned on (that round moved the source by less than kRebinAgainCells of them, or ran
+      // out of rounds), so the stage costs no re-binning of its own.
+      std::optional<CoarserDepth> coarser;
+      if (is_finest && options.joint_finest_stage && last_cells.has_value() &&
+          !options.evaluate_only) {
+        CoarserDepth& c = coarser.emplace();
+        c.cells = &*last_cells;
+        c.options = options;
+        c.options.covariance_epsilon = options.coarse_covariance_epsilon;
+        c.options.weights = options.coarse_weights;
+        c.data = MakeDepthData(*last_side, shared.Target(depth - 1, c.options), c.options);
+        c.R0 = last_R0;
+        c.t0 = last_t0;
+        stage.joint = true;
+      }
+      const StageOutcome outcome =
+          RunStage(stage_source, target, data, is_finest, stage_options, corr, stage_R, stage_t,
+                   stage, result, coarser ? &*coarser : nullptr);
+      if (rebin && depth == finest - 1) {
+        last_R0 = R;
+        last_t0 = t;
+        last_cells = std::move(rebinned);
+        last_side = std::move(rebinned_side);
+      }
       if (rebin) {
         R = stage_R * R;
         t = stage_R * t + stage_t;

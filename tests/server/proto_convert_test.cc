@@ -79,6 +79,17 @@ TEST(ProtoConvertTest, RebinnedCoarseDepthsAreOnUnlessTurnedOff) {
   EXPECT_TRUE(options->refinement.rebin_coarse_depths);
 }
 
+TEST(ProtoConvertTest, JointFinestStageIsOnUnlessTurnedOff) {
+  auto options = OptionsFromProto({});
+  ASSERT_TRUE(options.ok());
+  EXPECT_TRUE(options->refinement.joint_finest_stage);
+  v1::RegisterOptions proto;
+  proto.set_joint_finest_stage(false);
+  options = OptionsFromProto(proto);
+  ASSERT_TRUE(options.ok());
+  EXPECT_FALSE(options->refinement.joint_finest_stage);
+}
+
 // The later starts are on unless a client says otherwise (proto3 optional: absent is not false).
 TEST(ProtoConvertTest, LaterStartsAreOnUnlessTurnedOff) {
   auto options = OptionsFromProto({});

@@ -33,15 +33,16 @@ using testing_util::Sphere;
 
 constexpr double kDeg = M_PI / 180.0;
 
-// Refines 60 unseen object pairs of `pair_options` (seeds 1000..1059) from the truth perturbed by
-// 5-15 degrees and 0.05-0.1 (network-sized errors) and counts those ending beyond (1 deg, 0.01);
-// `check` also sees each result.
-int FailuresFromNetworkSizedErrors(
+// Refines 60 object pairs of `pair_options` (seeds 1000..1059) from the truth perturbed by
+// a..3a degrees and 0.01a..0.02a (a = min_angle_deg; 5: 5-15 degrees and 0.05-0.1, network-sized
+// errors) and counts those ending beyond (1 deg, 0.01); `check` also sees each result.
+int FailuresFromPerturbedStarts(
     const PairOptions& pair_options, const TreeRefinementOptions& options,
+    double min_angle_deg = 5.0,
     const std::function<void(const TreeRefinementResult&)>& check = nullptr) {
   std::mt19937_64 rng(11);
-  std::uniform_real_distribution<double> angle(5.0, 15.0);
-  std::uniform_real_distribution<double> shift(0.05, 0.1);
+  std::uniform_real_distribution<double> angle(min_angle_deg, 3.0 * min_angle_deg);
+  std::uniform_real_distribution<double> shift(0.01 * min_angle_deg, 0.02 * min_angle_deg);
   int failed = 0;
   for (uint64_t seed = 0; seed < 60; ++seed) {
     auto pair = MakeObjectPair(pair_options, 1000 + seed);
@@ -107,8 +108,8 @@ TEST(TreeRefinementTest, RebinnedCoarseStagesReachTheTruthMoreOften) {
   auto failures = [&](bool rebin) {
     TreeRefinementOptions options;
     options.rebin_coarse_depths = rebin;
-    return FailuresFromNetworkSizedErrors(
-        pair_options, options, [&](const TreeRefinementResult& result) {
+    return FailuresFromPerturbedStarts(
+        pair_options, options, 5.0, [&](const TreeRefinementResult& result) {
           EXPECT_EQ(result.stages.size(), 4u);  // one entry per depth 3..6, rounds folded in
           if (rebin) {
             EXPECT_GE(result.stages[0].rounds, 1);
@@ -118,8 +119,9 @@ TEST(TreeRefinementTest, RebinnedCoarseStagesReachTheTruthMoreOften) {
   };
   const int own_cells = failures(false);
   const int rebinned = failures(true);
-  // 24 and 15 of 60 here (14 when the re-binned depths weighed cells by inverse density; clean:
-  // 8 and 8; 120 clean pairs: 23 and 17, both measured then).
+  // 24 and 14 of 60 here (15 before the finest stage also fitted the coarser depth; 14 when the
+  // re-binned depths weighed cells by inverse density; clean: 8 and 8; 120 clean pairs: 23 and
+  // 17, both measured then).
   EXPECT_LE(rebinned, own_cells - 5);
 }
 
@@ -136,13 +138,63 @@ TEST(TreeRefinementTest, RebinnedDepthsCountingCellsResistOutliers) {
   auto failures = [&](WeightScheme coarse_weights) {
     TreeRefinementOptions options;
     options.coarse_weights = coarse_weights;
-    return FailuresFromNetworkSizedErrors(pair_options, options);
+    return FailuresFromPerturbedStarts(pair_options, options);
   };
   EXPECT_EQ(TreeRefinementOptions{}.coarse_weights, WeightScheme::kUniform);
   const int inverse_density = failures(WeightScheme::kInverseDensity);
   const int cells = failures(WeightScheme::kUniform);
-  // 15 and 8 of 60 here.
+  // 16 and 8 of 60 here (15 and 8 before the finest stage also fitted the coarser depth).
   EXPECT_LE(cells, inverse_density - 4);
+}
+
+// The finest stage also fits the next coarser depth (TreeRefinementOptions::joint_finest_stage):
+// jittered sources' finest cells hold single noisy samples whose shapes are noise, and the finest
+// depth alone stopped where the coarser stages had left the pose. Unseen objects, jitter 0.05,
+// from 2-6 degree starts (the pose a converged coarse stage hands over; from 5-15 degrees the
+// coarse stages' own failures dominate: 25 and 26 of 60 fail).
+TEST(TreeRefinementTest, JointFinestStageHoldsJitteredPairsCloser) {
+  PairOptions pair_options;
+  pair_options.split = ObjectSplit::kM2Unseen;
+  pair_options.disturbance = DisturbanceKind::kJitter;
+  pair_options.disturbance_level = 3;  // 0.05
+  auto failures = [&](bool joint) {
+    TreeRefinementOptions options;
+    options.joint_finest_stage = joint;
+    return FailuresFromPerturbedStarts(
+        pair_options, options, 2.0,
+        [&](const TreeRefinementResult& result) { EXPECT_EQ(result.stages.back().joint, joint); });
+  };
+  EXPECT_TRUE(TreeRefinementOptions{}.joint_finest_stage);
+  const int finest_alone = failures(false);
+  const int joint = failures(true);
+  // 31 and 24 of 60 here (jitter 0.03: 15 and 13).
+  EXPECT_LE(joint, finest_alone - 4);
+}
+
+TEST(TreeRefinementTest, JointFinestStageNeedsRebinnedCoarserDepth) {
+  PairOptions pair_options;
+  auto pair = MakeObjectPair(pair_options, 3);
+  ASSERT_TRUE(pair.ok());
+  const Octree source = RefinementTree(pair->source, 6);
+  const Octree target = RefinementTree(pair->target, 6);
+  auto last_stage = [&](const TreeRefinementOptions& options) {
+    auto result = RefineOnTrees(source, target, pair->T_target_source, options);
+    EXPECT_TRUE(result.ok()) << result.status();
+    return result->stages.back();
+  };
+  const DepthStage joint = last_stage({});
+  EXPECT_TRUE(joint.joint);
+  EXPECT_GT(joint.coarser_correspondences, 50);  // depth 5's cells around the surface
+  TreeRefinementOptions alone;
+  alone.joint_finest_stage = false;
+  EXPECT_FALSE(last_stage(alone).joint);
+  EXPECT_EQ(last_stage(alone).coarser_correspondences, 0);
+  TreeRefinementOptions own_cells;  // the coarser depth it would add is a re-binned one
+  own_cells.rebin_coarse_depths = false;
+  EXPECT_FALSE(last_stage(own_cells).joint);
+  TreeRefinementOptions one_depth;  // no coarser stage ran
+  one_depth.coarsest_depth = 6;
+  EXPECT_FALSE(last_stage(one_depth).joint);
 }
 
 TEST(TreeRefinementTest, SimulatedLidarPairFiveFramesApartFromIdentity) {
@@ -325,11 +377,15 @@ TEST(TreeRefinementTest, EvaluateOnlyMeasuresWithoutMoving) {
   ASSERT_TRUE(at_initial.ok());
   EXPECT_EQ(at_initial->T_target_source.matrix(), initial.matrix());
   EXPECT_LT(at_initial->fitness, refined->fitness);
-  // The refinement records its last update per stage; the finest one is tiny once converged.
+  // The refinement records its last update per stage; the finest one is small once converged.
+  // (Its step control ends the stage when no damped step lowers the cost, so the last step taken
+  // need not be below the epsilon test: with the coarser depth in the finest stage's cost, this
+  // pair's was 5e-3 of a cell.)
   ASSERT_FALSE(refined->stages.empty());
   EXPECT_GT(refined->stages.front().last_update_rotation_rad, 0.0);
+  EXPECT_TRUE(refined->stages.back().converged);
   EXPECT_LT(refined->stages.back().last_update_translation,
-            1e-3 * refined->stages.back().cell_edge);
+            1e-2 * refined->stages.back().cell_edge);
 }
 
 TEST(TreeRefinementTest, RejectsBadInputs) {
