@@ -471,8 +471,8 @@ struct Linearization {
   // that costs under different correspondence sets compare.
   double cost = 0.0;
   // A joint stage's coarser depth (TreeRefinementOptions::joint_finest_stage): its H, b and cost
-  // about the same `center`, added to the above for the step; zero otherwise. The statistics
-  // above (and the information the result reports) stay the finest depth's own.
+  // about the same `center`, added to the above for the step and for the information the result
+  // reports; zero otherwise. The other statistics above stay the finest depth's own.
   Matrix6d coarser_H = Matrix6d::Zero();
   Vector6d coarser_b = Vector6d::Zero();
   double coarser_cost = 0.0;
@@ -606,7 +606,8 @@ constexpr std::array<const char*, 6> kAxisNames = {"rotation about x",    "rotat
 
 void AnalyseDegeneracy(const Linearization& lin, const TreeRefinementOptions& options,
                        TreeRefinementResult& result) {
-  result.information = lin.H;
+  // A joint finest stage's estimate minimises both depths' cost: its information is their sum.
+  result.information = lin.H + lin.coarser_H;
   result.information_center = lin.center;
   // A rotation w about axis a moves the matched points by w times their RMS lever arm about a,
   // sqrt(trace(spread) - spread_aa): dividing the rotation rows and columns by it turns every
@@ -615,7 +616,7 @@ void AnalyseDegeneracy(const Linearization& lin, const TreeRefinementOptions& op
   for (int a = 0; a < 3; ++a) {
     s[a] = 1.0 / std::sqrt(std::max(lin.spread.trace() - lin.spread(a, a), 1e-24));
   }
-  const Matrix6d scaled = s.asDiagonal() * lin.H * s.asDiagonal();
+  const Matrix6d scaled = s.asDiagonal() * result.information * s.asDiagonal();
   Eigen::SelfAdjointEigenSolver<Matrix6d> solver(scaled);
   const Vector6d values = solver.eigenvalues();
   const double largest = std::max(values.maxCoeff(), 1e-300);
@@ -903,12 +904,6 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
   std::vector<Correspondence> corr;
   bool all_converged = true;
   Linearization final_lin;
-  // The last round of depth finest - 1 on re-binned cells: the joint finest stage's coarser depth
-  // (TreeRefinementOptions::joint_finest_stage), with the pose it was re-binned at.
-  std::optional<Octree> last_cells;
-  std::optional<SourceDepth> last_side;
-  Eigen::Matrix3d last_R0 = Eigen::Matrix3d::Identity();
-  Eigen::Vector3d last_t0 = Eigen::Vector3d::Zero();
   // Measuring only visits the finest depth (and the fitness depth below).
   for (int depth = options.evaluate_only ? finest : coarsest; depth <= finest; ++depth) {
     const bool is_finest = depth == finest;
@@ -957,31 +952,36 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
       stage.cell_edge = data.edge_target;
       stage.source_nodes = static_cast<int>(data.source->nodes.size());
       stage.prepare_seconds = SecondsSince(stage_start);
-      // The joint finest stage's coarser depth: the cells the last round of depth finest - 1 was
-      // re-binned on (that round moved the source by less than kRebinAgainCells of them, or ran
-      // out of rounds), so the stage costs no re-binning of its own.
+      // The joint finest stage's coarser depth (TreeRefinementOptions::joint_finest_stage): the
+      // source re-binned on the target's cells of depth finest - 1 at the pose this stage starts
+      // from. (Reusing the cells of that depth's last round instead, re-binned where the round
+      // started, saved 0.1 ms an object but lost: unseen study mean recall 0.760 -> 0.756, clean
+      // rotation RMSE 1.65 -> 4.05 deg.)
+      std::optional<Octree> coarser_cells;
+      std::optional<SourceDepth> coarser_side;
       std::optional<CoarserDepth> coarser;
-      if (is_finest && options.joint_finest_stage && last_cells.has_value() &&
-          !options.evaluate_only) {
-        CoarserDepth& c = coarser.emplace();
-        c.cells = &*last_cells;
-        c.options = options;
-        c.options.covariance_epsilon = options.coarse_covariance_epsilon;
-        c.options.weights = options.coarse_weights;
-        c.data = MakeDepthData(*last_side, shared.Target(depth - 1, c.options), c.options);
-        c.R0 = last_R0;
-        c.t0 = last_t0;
-        stage.joint = true;
+      // (Measuring only, evaluate_only, builds it too: the information is reported as a
+      // refinement ending at that pose would report it.)
+      if (is_finest && options.joint_finest_stage && options.rebin_coarse_depths &&
+          depth > coarsest) {
+        absl::StatusOr<Octree> cells = RebinOnTargetCells(source, depth, depth - 1, R, t, target);
+        if (cells.ok()) {  // else nothing of the source is inside the target's cube: finest alone
+          coarser_cells = *std::move(cells);
+          CoarserDepth& c = coarser.emplace();
+          c.cells = &*coarser_cells;
+          c.options = options;
+          c.options.covariance_epsilon = options.coarse_covariance_epsilon;
+          c.options.weights = options.coarse_weights;
+          PrepareSourceDepth(*coarser_cells, depth - 1, c.options, coarser_side.emplace());
+          c.data = MakeDepthData(*coarser_side, shared.Target(depth - 1, c.options), c.options);
+          c.R0 = R;
+          c.t0 = t;
+          stage.joint = true;
+        }
       }
       const StageOutcome outcome =
           RunStage(stage_source, target, data, is_finest, stage_options, corr, stage_R, stage_t,
                    stage, result, coarser ? &*coarser : nullptr);
-      if (rebin && depth == finest - 1) {
-        last_R0 = R;
-        last_t0 = t;
-        last_cells = std::move(rebinned);
-        last_side = std::move(rebinned_side);
-      }
       if (rebin) {
         R = stage_R * R;
         t = stage_R * t + stage_t;

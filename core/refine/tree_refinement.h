@@ -91,8 +91,9 @@ struct TreeRefinementOptions {
   // max_rebin_rounds times. false: the source tree's own cells (the paper's Eq. 2 as written).
   bool rebin_coarse_depths = true;
   int max_rebin_rounds = 2;
-  // The finest stage minimises the finest depth's cost plus that of the next coarser depth on the
-  // cells its last re-binned round used (needs rebin_coarse_depths and at least two stages):
+  // The finest stage minimises the finest depth's cost plus that of the next coarser depth, the
+  // source re-binned on the target's cells at the stage's starting pose (needs
+  // rebin_coarse_depths and at least two stages):
   // Eq. 2's sum over depths, restricted to the last two, each residual unitless (Mahalanobis in
   // its own cells) so that a correspondence counts once at either depth. A 1,024-point object's
   // depth-6 cells hold single samples, fewer of which find a partner within a cell (~230
@@ -108,7 +109,8 @@ struct TreeRefinementOptions {
   // identity, rotation / translation RMSE 0.168 deg / 0.033 m -> 0.158 / 0.025 (ground removed)
   // and 0.110 / 0.0095 -> 0.064 / 0.0042 (kept). It costs a second linearisation per finest
   // iteration: objects refine 3.7 -> 4.9 ms, 120k-point scans 11.7 -> 14.0 ms (registrar_bench).
-  // The information, fitness and RMSE the result reports stay the finest depth's own.
+  // The information the result reports is that of the joint cost (both depths), the estimate's
+  // own; fitness and inlier RMSE stay the finest depth's.
   bool joint_finest_stage = true;
   // covariance_epsilon of the re-binned stages: their cells hold the same part of the surface as
   // the target's at the true pose, so their CoMs may also pull along the surface (a looser plane
@@ -251,7 +253,8 @@ struct TreeRefinementResult {
   // Mean Geman-McClure weight of the correspondences at fitness_depth (1: every partner within a
   // small fraction of a cell of its plane).
   double mean_robust_weight = 0.0;
-  // 6x6 Gauss-Newton information (J^T W J) at the final transform, finest depth, ordered
+  // 6x6 Gauss-Newton information (J^T W J) at the final transform, finest depth (plus the
+  // coarser one of a joint finest stage, TreeRefinementOptions::joint_finest_stage), ordered
   // (rotation x, y, z [1/rad^2], translation x, y, z [1/m^2]) for a perturbation applied in the
   // TARGET frame about `information_center`: T <- [exp(w) | c - exp(w) c + v] T. Weights are
   // normalised to average 1 per correspondence and the residual covariance is the regularised one.
