@@ -79,10 +79,13 @@ const TreePairs& LidarTrees() {
 
 // `prepared`: each target prepared once beforehand (Registrar::PrepareTarget), as a caller that
 // registers many sources against one reference would; the preparation is not timed.
+// `joint_finest_stage` false: the refinement's finest depth alone (what the joint finest stage
+// costs, TreeRefinementOptions::joint_finest_stage).
 void RunRegister(benchmark::State& state, const TreePairs& trees, bool prepared = false,
-                 const Registrar& registrar = SharedRegistrar()) {
+                 const Registrar& registrar = SharedRegistrar(), bool joint_finest_stage = true) {
   RegistrationOptions options;
   options.mode = static_cast<RegistrationMode>(state.range(0));
+  options.refinement.joint_finest_stage = joint_finest_stage;
   std::vector<std::shared_ptr<const PreparedTarget>> targets;
   for (size_t i = 0; prepared && i < trees.size(); ++i) {
     auto target = registrar.PrepareTarget(trees.trees[2 * i + 1]);
@@ -122,6 +125,16 @@ BENCHMARK(BM_RegisterObjects)
     ->ArgName("mode")
     ->Arg(static_cast<int>(RegistrationMode::kNetRefine))
     ->Arg(static_cast<int>(RegistrationMode::kNet))
+    ->Arg(static_cast<int>(RegistrationMode::kRefine))
+    ->Unit(benchmark::kMillisecond);
+
+// The same pairs with the finest depth refined alone (no coarser depth in the finest stage).
+void BM_RegisterObjectsFinestAlone(benchmark::State& state) {
+  RunRegister(state, ObjectTrees(), false, SharedRegistrar(), /*joint_finest_stage=*/false);
+}
+BENCHMARK(BM_RegisterObjectsFinestAlone)
+    ->ArgName("mode")
+    ->Arg(static_cast<int>(RegistrationMode::kNetRefine))
     ->Arg(static_cast<int>(RegistrationMode::kRefine))
     ->Unit(benchmark::kMillisecond);
 
@@ -194,6 +207,15 @@ BENCHMARK(BM_RegisterLidar)
     ->ArgName("mode")
     ->Arg(static_cast<int>(RegistrationMode::kNetRefine))
     ->Arg(static_cast<int>(RegistrationMode::kNet))
+    ->Arg(static_cast<int>(RegistrationMode::kRefine))
+    ->Unit(benchmark::kMillisecond);
+
+void BM_RegisterLidarFinestAlone(benchmark::State& state) {
+  RunRegister(state, LidarTrees(), false, SharedRegistrar(), /*joint_finest_stage=*/false);
+}
+BENCHMARK(BM_RegisterLidarFinestAlone)
+    ->ArgName("mode")
+    ->Arg(static_cast<int>(RegistrationMode::kNetRefine))
     ->Arg(static_cast<int>(RegistrationMode::kRefine))
     ->Unit(benchmark::kMillisecond);
 
