@@ -771,6 +771,11 @@ Linearization LinearizeStage(const Octree& source, const Octree& target, DepthDa
   return lin;
 }
 
+// Step control's damping (relative to H's mean diagonal) after a first refused step. Measured
+// against the tenfold ladder from 1e-6 (unseen study, KITTI-style K2 refine, registrar_bench):
+// the same mean recall (0.7595) and K2 RMSE, objects refine 5.1 -> 4.6 ms, scans 14.0 -> 12.1 ms.
+constexpr double kFirstRefusedDamping = 1e-2;
+
 struct StageOutcome {
   Linearization lin;      // at the last iterate (the final transform at the finest depth)
   bool singular = false;  // the normal equations had no solution
@@ -825,8 +830,10 @@ StageOutcome RunStage(const Octree& source, const Octree& target, DepthData& dat
         (next.step_cost() > lin.step_cost() ||
          next.correspondences < options.min_correspondences)) {
       // Uphill (or losing the overlap): stay, damp harder. A step this small that still climbs
-      // means the minimum is here.
-      damping = std::max(damping, 1e-6) * 10.0;
+      // means the minimum is here. The first refused step jumps to kFirstRefusedDamping: below
+      // it the damped step was the refused one again (82% of an object's finest iterations were
+      // refusals climbing 1e-5, 1e-4, ... each a linearisation of both depths).
+      damping = std::max(damping * 10.0, kFirstRefusedDamping);
       if (small || damping > 1e4) {
         stage.converged = true;
         break;
