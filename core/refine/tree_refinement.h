@@ -108,7 +108,8 @@ struct TreeRefinementOptions {
   // noise 0.1 / 0.4, outliers 0.4 and crop 0.4 within two pairs; KITTI-style pairs refined from the
   // identity, rotation / translation RMSE 0.168 deg / 0.033 m -> 0.157 / 0.025 (ground removed)
   // and 0.110 / 0.0095 -> 0.064 / 0.0042 (kept). It costs a second linearisation per finest
-  // iteration: objects refine 3.7 -> 4.9 ms, 120k-point scans 11.7 -> 14.0 ms (registrar_bench).
+  // iteration: objects refine 3.5 -> 4.7 ms, 120k-point scans 10.3 -> 12.3 ms (registrar_bench,
+  // BM_Register*FinestAlone against BM_Register*).
   // The information the result reports is that of the joint cost (both depths), the estimate's
   // own; fitness and inlier RMSE stay the finest depth's.
   bool joint_finest_stage = true;
