@@ -740,13 +740,22 @@ constexpr double kRebinAgainCells = 0.25;
 // A re-binned depth d is built from the source's nodes at depth min(finest, d + this).
 constexpr int kRebinFromDepthsBelow = 3;
 
+// The options of a stage on re-binned cells: the coarse covariance epsilon and weights.
+TreeRefinementOptions RebinnedStageOptions(const TreeRefinementOptions& options) {
+  TreeRefinementOptions out = options;
+  out.covariance_epsilon = options.coarse_covariance_epsilon;
+  out.weights = options.coarse_weights;
+  return out;
+}
+
 // The coarser depth of a joint finest stage: the source re-binned on the target's cells of
 // depth finest - 1 at the stage's starting pose (R0, t0), so a pose (R, t) moves those cells by
-// (R R0^T, t - R R0^T t0).
+// (R R0^T, t - R R0^T t0). Filled in place (`data` points at `side`).
 struct CoarserDepth {
-  const Octree* cells = nullptr;  // the re-binned source
+  Octree cells;  // the re-binned source
+  SourceDepth side;
   DepthData data;
-  TreeRefinementOptions options;  // the re-binned depths' epsilon and weights
+  TreeRefinementOptions options;  // RebinnedStageOptions
   Eigen::Matrix3d R0 = Eigen::Matrix3d::Identity();
   Eigen::Vector3d t0 = Eigen::Vector3d::Zero();
   std::vector<Correspondence> corr;
@@ -762,8 +771,8 @@ Linearization LinearizeStage(const Octree& source, const Octree& target, DepthDa
   if (coarser == nullptr || lin.correspondences == 0) return lin;
   const Eigen::Matrix3d dR = R * coarser->R0.transpose();
   const Eigen::Vector3d dt = t - dR * coarser->t0;
-  const Linearization c = Linearize(*coarser->cells, target, coarser->data, dR, dt,
-                                    coarser->options, coarser->corr, &lin.center);
+  const Linearization c = Linearize(coarser->cells, target, coarser->data, dR, dt, coarser->options,
+                                    coarser->corr, &lin.center);
   lin.coarser_H = c.H;
   lin.coarser_b = c.b;
   lin.coarser_cost = c.cost;
@@ -943,11 +952,7 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
       const Octree& stage_source = rebin ? *rebinned : source;
       Eigen::Matrix3d stage_R = rebin ? Eigen::Matrix3d::Identity() : R;
       Eigen::Vector3d stage_t = rebin ? Eigen::Vector3d::Zero() : t;
-      TreeRefinementOptions stage_options = options;
-      if (rebin) {
-        stage_options.covariance_epsilon = options.coarse_covariance_epsilon;
-        stage_options.weights = options.coarse_weights;
-      }
+      const TreeRefinementOptions stage_options = rebin ? RebinnedStageOptions(options) : options;
       // Re-binned cells are new at every round; the source's own cells and the target's side
       // come from the cache (shared with the other rounds and starts).
       std::optional<SourceDepth> rebinned_side;
@@ -964,8 +969,6 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
       // from. (Reusing the cells of that depth's last round instead, re-binned where the round
       // started, saved 0.1 ms an object but lost: unseen study mean recall 0.760 -> 0.756, clean
       // rotation RMSE 1.65 -> 4.05 deg.)
-      std::optional<Octree> coarser_cells;
-      std::optional<SourceDepth> coarser_side;
       std::optional<CoarserDepth> coarser;
       // (Measuring only, evaluate_only, builds it too: the information is reported as a
       // refinement ending at that pose would report it.)
@@ -973,14 +976,11 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
           depth > coarsest) {
         absl::StatusOr<Octree> cells = RebinOnTargetCells(source, depth, depth - 1, R, t, target);
         if (cells.ok()) {  // else nothing of the source is inside the target's cube: finest alone
-          coarser_cells = *std::move(cells);
           CoarserDepth& c = coarser.emplace();
-          c.cells = &*coarser_cells;
-          c.options = options;
-          c.options.covariance_epsilon = options.coarse_covariance_epsilon;
-          c.options.weights = options.coarse_weights;
-          PrepareSourceDepth(*coarser_cells, depth - 1, c.options, coarser_side.emplace());
-          c.data = MakeDepthData(*coarser_side, shared.Target(depth - 1, c.options), c.options);
+          c.cells = *std::move(cells);
+          c.options = RebinnedStageOptions(options);
+          PrepareSourceDepth(c.cells, depth - 1, c.options, c.side);
+          c.data = MakeDepthData(c.side, shared.Target(depth - 1, c.options), c.options);
           c.R0 = R;
           c.t0 = t;
           stage.joint = true;

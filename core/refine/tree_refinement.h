@@ -100,14 +100,14 @@ struct TreeRefinementOptions {
   // correspondences against ~440 at depth 5, mean over 50 unseen pairs refined from the
   // identity), and under noise their borrowed normals are noise too, so the finest
   // depth alone barely moved from where the coarser stages handed it the pose (refined from the
-  // truth it kept 33 of 35 jitter misses in place; object_failure_anatomy). The coarser cells
-  // average the noise and keep constraining the pose while the finest ones add their detail.
-  // Measured against the finest depth alone (`--joint_finest_stage=false`), recall at (1 deg,
-  // 0.01) on unseen objects (`rpsr eval --protocol objects --split unseen --count 200 --seed 2`
-  // per setting): jitter 0.03 0.715 -> 0.760, jitter 0.05 0.315 -> 0.395, clean 0.845 -> 0.855,
+  // truth it kept 33 of 35 jitter misses in place, object_failure_anatomy before this change). The
+  // coarser cells average the noise and keep constraining the pose while the finest ones add their
+  // detail. Measured against the finest depth alone (`--joint_finest_stage=false`), recall at (1
+  // deg, 0.01) on unseen objects (`rpsr eval --protocol objects --split unseen --count 200 --seed
+  // 2` per setting): jitter 0.03 0.715 -> 0.760, jitter 0.05 0.315 -> 0.395, clean 0.845 -> 0.855,
   // noise 0.1 / 0.4, outliers 0.4 and crop 0.4 within two pairs; KITTI-style pairs refined from the
   // identity, rotation / translation RMSE 0.168 deg / 0.033 m -> 0.157 / 0.025 (ground removed)
-  // and 0.110 / 0.0095 -> 0.064 / 0.0042 (kept). It costs a second linearisation per finest
+  // and 0.110 / 0.0095 -> 0.064 / 0.0040 (kept). It costs a second linearisation per finest
   // iteration: objects refine 3.5 -> 4.7 ms, 120k-point scans 10.3 -> 12.3 ms (registrar_bench,
   // BM_Register*FinestAlone against BM_Register*).
   // The information the result reports is that of the joint cost (both depths), the estimate's
