@@ -477,6 +477,12 @@ struct Linearization {
   Vector6d coarser_b = Vector6d::Zero();
   double coarser_cost = 0.0;
   int coarser_correspondences = 0;
+  // Sum of the correspondences' final weights (the spread's normaliser), the coarser depth's too.
+  double weight_sum = 0.0;
+  double coarser_weight_sum = 0.0;
+  // H, b and spread are assembled (AddSystem); false for a step-controlled candidate until it is
+  // accepted.
+  bool has_system = false;
 
   double step_cost() const { return cost + coarser_cost; }
 };
@@ -489,12 +495,51 @@ double InlierRmseOf(const Linearization& lin) {
   return lin.inlier_count > 0 ? std::sqrt(lin.inlier_sq_sum / lin.inlier_count) : 0.0;
 }
 
+// H += J^T W J and b += J^T W r over `corr` (as Linearize left them: weighted, about lin.center),
+// and the matched spread. Separate from Linearize because the finest stage's step control refuses
+// most candidate steps (three in four on objects) by their cost alone, and this loop is a large
+// share of a linearisation.
+void AddSystem(const std::vector<Correspondence>& corr, Linearization& lin) {
+  lin.has_system = true;
+  if (!(lin.weight_sum > 0.0)) return;
+  // With J = [[a]x, -I] (a = moved CoM about the centre) and W = weight * information, written
+  // out in 3x3 blocks: with Q = [a]x W, J^T W J is [[-Q [a]x, Q], [Q^T, W]] and J^T W r is
+  // [(W r) x a, -W r] (about a third of the products of the 6x3 form).
+  Eigen::Matrix3d H_rr = Eigen::Matrix3d::Zero();
+  Eigen::Matrix3d H_rt = Eigen::Matrix3d::Zero();
+  Eigen::Matrix3d H_tt = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d b_r = Eigen::Vector3d::Zero();
+  Eigen::Vector3d b_t = Eigen::Vector3d::Zero();
+  for (const Correspondence& c : corr) {
+    const Eigen::Vector3d a = c.moved - lin.center;
+    const Eigen::Vector3d arm = c.target_mean - lin.center;
+    lin.spread.noalias() += c.weight * arm * arm.transpose();
+    const Eigen::Matrix3d W = c.weight * c.information;
+    Eigen::Matrix3d Q;
+    for (int j = 0; j < 3; ++j) Q.col(j) = a.cross(W.col(j));
+    for (int i = 0; i < 3; ++i) H_rr.row(i) += a.cross(Q.row(i).transpose()).transpose();
+    H_rt += Q;
+    H_tt += W;
+    const Eigen::Vector3d Wr = W * (c.target_mean - c.moved);
+    b_r += Wr.cross(a);
+    b_t -= Wr;
+  }
+  lin.H.topLeftCorner<3, 3>() = H_rr;
+  lin.H.topRightCorner<3, 3>() = H_rt;
+  lin.H.bottomLeftCorner<3, 3>() = H_rt.transpose();
+  lin.H.bottomRightCorner<3, 3>() = H_tt;
+  lin.b.head<3>() = b_r;
+  lin.b.tail<3>() = b_t;
+  lin.spread /= lin.weight_sum;
+}
+
 // `fixed_center`: express H and b about this point instead of the matched centroid (a joint
 // stage's coarser depth uses the finest depth's, so that the two systems add).
+// `with_system` false: correspondences, weights, cost and statistics only; AddSystem completes it.
 Linearization Linearize(const Octree& source, const Octree& target, DepthData& data,
                         const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
                         const TreeRefinementOptions& options, std::vector<Correspondence>& corr,
-                        const Eigen::Vector3d* fixed_center = nullptr) {
+                        const Eigen::Vector3d* fixed_center = nullptr, bool with_system = true) {
   Linearization lin;
   corr.clear();
   const double max_d = options.max_correspondence_distance_cells * data.edge_target;
@@ -565,38 +610,10 @@ Linearization Linearize(const Octree& source, const Octree& target, DepthData& d
       ++lin.inlier_nodes;
     }
   }
+  lin.weight_sum = weight_sum;
   if (!(weight_sum > 0.0)) return lin;
   lin.center = fixed_center != nullptr ? *fixed_center : centroid / weight_sum;
-  // H += J^T W J and b += J^T W r with J = [[a]x, -I] (a = moved CoM about the centre) and
-  // W = weight * information, written out in 3x3 blocks: with Q = [a]x W, J^T W J is
-  // [[-Q [a]x, Q], [Q^T, W]] and J^T W r is [(W r) x a, -W r] (about a third of the products of
-  // the 6x3 form, in the loop that dominates the refinement's time).
-  Eigen::Matrix3d H_rr = Eigen::Matrix3d::Zero();
-  Eigen::Matrix3d H_rt = Eigen::Matrix3d::Zero();
-  Eigen::Matrix3d H_tt = Eigen::Matrix3d::Zero();
-  Eigen::Vector3d b_r = Eigen::Vector3d::Zero();
-  Eigen::Vector3d b_t = Eigen::Vector3d::Zero();
-  for (const Correspondence& c : corr) {
-    const Eigen::Vector3d a = c.moved - lin.center;
-    const Eigen::Vector3d arm = c.target_mean - lin.center;
-    lin.spread.noalias() += c.weight * arm * arm.transpose();
-    const Eigen::Matrix3d W = c.weight * c.information;
-    Eigen::Matrix3d Q;
-    for (int j = 0; j < 3; ++j) Q.col(j) = a.cross(W.col(j));
-    for (int i = 0; i < 3; ++i) H_rr.row(i) += a.cross(Q.row(i).transpose()).transpose();
-    H_rt += Q;
-    H_tt += W;
-    const Eigen::Vector3d Wr = W * (c.target_mean - c.moved);
-    b_r += Wr.cross(a);
-    b_t -= Wr;
-  }
-  lin.H.topLeftCorner<3, 3>() = H_rr;
-  lin.H.topRightCorner<3, 3>() = H_rt;
-  lin.H.bottomLeftCorner<3, 3>() = H_rt.transpose();
-  lin.H.bottomRightCorner<3, 3>() = H_tt;
-  lin.b.head<3>() = b_r;
-  lin.b.tail<3>() = b_t;
-  lin.spread /= weight_sum;
+  if (with_system) AddSystem(corr, lin);
   return lin;
 }
 
@@ -762,22 +779,39 @@ struct CoarserDepth {
 };
 
 // The finest depth's linearisation at (R, t), with the coarser depth's share added when the stage
-// is joint.
+// is joint. `with_system` false: costs and correspondences only (CompleteStageSystem adds H and b
+// while `corr` and the coarser depth's correspondences are still this linearisation's).
 Linearization LinearizeStage(const Octree& source, const Octree& target, DepthData& data,
                              const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
                              const TreeRefinementOptions& options,
-                             std::vector<Correspondence>& corr, CoarserDepth* coarser) {
-  Linearization lin = Linearize(source, target, data, R, t, options, corr);
+                             std::vector<Correspondence>& corr, CoarserDepth* coarser,
+                             bool with_system = true) {
+  Linearization lin = Linearize(source, target, data, R, t, options, corr, nullptr, with_system);
   if (coarser == nullptr || lin.correspondences == 0) return lin;
   const Eigen::Matrix3d dR = R * coarser->R0.transpose();
   const Eigen::Vector3d dt = t - dR * coarser->t0;
   const Linearization c = Linearize(coarser->cells, target, coarser->data, dR, dt, coarser->options,
-                                    coarser->corr, &lin.center);
+                                    coarser->corr, &lin.center, with_system);
   lin.coarser_H = c.H;
   lin.coarser_b = c.b;
   lin.coarser_cost = c.cost;
   lin.coarser_correspondences = c.correspondences;
+  lin.coarser_weight_sum = c.weight_sum;
   return lin;
+}
+
+// Adds H and b to a linearisation made without them, from the correspondences it left.
+void CompleteStageSystem(const std::vector<Correspondence>& corr, CoarserDepth* coarser,
+                         Linearization& lin) {
+  if (lin.has_system) return;
+  AddSystem(corr, lin);
+  if (coarser == nullptr || lin.correspondences == 0) return;
+  Linearization c;
+  c.center = lin.center;
+  c.weight_sum = lin.coarser_weight_sum;
+  AddSystem(coarser->corr, c);
+  lin.coarser_H = c.H;
+  lin.coarser_b = c.b;
 }
 
 // Step control's damping (relative to H's mean diagonal) after a first refused step. Measured
@@ -833,11 +867,13 @@ StageOutcome RunStage(const Octree& source, const Octree& target, DepthData& dat
     ++stage.iterations;
     ++result.iterations;
     const bool small = angle < rotation_epsilon && v.norm() < translation_epsilon;
-    Linearization next =
-        LinearizeStage(source, target, data, next_R, next_t, options, corr, coarser);
-    if (options.step_control && is_finest &&
-        (next.step_cost() > lin.step_cost() ||
-         next.correspondences < options.min_correspondences)) {
+    // A step the step control may refuse is judged by its cost alone; its system is assembled
+    // only once it is accepted.
+    const bool controlled = options.step_control && is_finest;
+    Linearization next = LinearizeStage(source, target, data, next_R, next_t, options, corr,
+                                        coarser, /*with_system=*/!controlled);
+    if (controlled && (next.step_cost() > lin.step_cost() ||
+                       next.correspondences < options.min_correspondences)) {
       // Uphill (or losing the overlap): stay, damp harder. A step this small that still climbs
       // means the minimum is here. The first refused step jumps to kFirstRefusedDamping: below
       // it the damped step was the refused one again (82% of an object's finest iterations were
@@ -851,6 +887,7 @@ StageOutcome RunStage(const Octree& source, const Octree& target, DepthData& dat
     }
     R = next_R;
     t = next_t;
+    CompleteStageSystem(corr, coarser, next);
     lin = std::move(next);
     stage.correspondences = lin.correspondences;
     stage.coarser_correspondences = lin.coarser_correspondences;
