@@ -679,7 +679,8 @@ absl::Status ValidateInputs(const Octree& source, const Octree& target,
         o.max_rebin_rounds, ") must be positive, min_count_for_covariance non-negative"));
   }
   if (!(o.rotation_epsilon_rad > 0) || !(o.translation_epsilon_cells > 0) ||
-      !(o.max_correspondence_distance_cells > 0) || !(o.covariance_epsilon > 0) ||
+      !(o.max_correspondence_distance_cells > 0) ||
+      !(o.coarse_max_correspondence_distance_cells > 0) || !(o.covariance_epsilon > 0) ||
       !(o.covariance_epsilon <= 1) || !(o.coarse_covariance_epsilon > 0) ||
       !(o.coarse_covariance_epsilon <= 1) || !(o.robust_scale_cells > 0) ||
       !(o.inlier_distance_cells > 0) || !(o.fitness_min_mean_count >= 0) || !(o.damping >= 0) ||
@@ -757,11 +758,18 @@ constexpr double kRebinAgainCells = 0.25;
 // A re-binned depth d is built from the source's nodes at depth min(finest, d + this).
 constexpr int kRebinFromDepthsBelow = 3;
 
-// The options of a stage on re-binned cells: the coarse covariance epsilon and weights.
-TreeRefinementOptions RebinnedStageOptions(const TreeRefinementOptions& options) {
+// The options of a stage on re-binned cells: the coarse covariance epsilon and weights; and for
+// a coarse stage itself (not the joint finest stage's coarser depth, which polishes within a
+// cell) the coarse correspondence search.
+TreeRefinementOptions RebinnedStageOptions(const TreeRefinementOptions& options,
+                                           bool coarse_search) {
   TreeRefinementOptions out = options;
   out.covariance_epsilon = options.coarse_covariance_epsilon;
   out.weights = options.coarse_weights;
+  if (coarse_search) {
+    out.search_27_neighbors = options.coarse_search_27_neighbors;
+    out.max_correspondence_distance_cells = options.coarse_max_correspondence_distance_cells;
+  }
   return out;
 }
 
@@ -989,7 +997,8 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
       const Octree& stage_source = rebin ? *rebinned : source;
       Eigen::Matrix3d stage_R = rebin ? Eigen::Matrix3d::Identity() : R;
       Eigen::Vector3d stage_t = rebin ? Eigen::Vector3d::Zero() : t;
-      const TreeRefinementOptions stage_options = rebin ? RebinnedStageOptions(options) : options;
+      const TreeRefinementOptions stage_options =
+          rebin ? RebinnedStageOptions(options, /*coarse_search=*/true) : options;
       // Re-binned cells are new at every round; the source's own cells and the target's side
       // come from the cache (shared with the other rounds and starts).
       std::optional<SourceDepth> rebinned_side;
@@ -1015,7 +1024,7 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
         if (cells.ok()) {  // else nothing of the source is inside the target's cube: finest alone
           CoarserDepth& c = coarser.emplace();
           c.cells = *std::move(cells);
-          c.options = RebinnedStageOptions(options);
+          c.options = RebinnedStageOptions(options, /*coarse_search=*/false);
           PrepareSourceDepth(c.cells, depth - 1, c.options, c.side);
           c.data = MakeDepthData(c.side, shared.Target(depth - 1, c.options), c.options);
           c.R0 = R;

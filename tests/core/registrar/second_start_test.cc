@@ -87,7 +87,8 @@ TEST(RegistrarSecondStartTest, SearchedStartRescuesMotionsOfTenMetres) {
   stream.pairs_per_sequence = 8;
   stream.stream_seed = DeriveSeed(11, 1010);
   const RegistrationPairGenerator pairs = MakeLidarPairStream(stream);
-  for (int index : {25, 28, 31, 56}) {
+  for (int index : {25, 31}) {  // 15-16 m off without the search (28 and 56 were too before
+                                // the coarse stages searched two cells)
     auto pair = pairs(index);
     ASSERT_TRUE(pair.ok()) << pair.status();
     const Octree source = TreeOf(pair->source, 9);
