@@ -392,7 +392,9 @@ int32_t FindPartner(const Octree& target, DepthData& data, size_t k, const Eigen
   const double cells = static_cast<double>(uint64_t{1} << depth);
   const double scale = cells / (2.0 * target.half_length());
   const Eigen::Vector3d f = (q - target.center()).array() * scale + 0.5 * cells;
-  // Farther than a cell outside the cube: nothing can be within reach.
+  // Farther than a cell outside the cube: skipped (beyond the reach of a one-cell search; a
+  // two-cell search, coarse_max_correspondence_distance_cells, could still find a border cell
+  // for it, but its block is built around the clamped home cell anyway).
   for (int a = 0; a < 3; ++a) {
     if (!(f[a] > -1.0 && f[a] < cells + 1.0)) return -1;
   }
