@@ -33,6 +33,15 @@ using testing_util::Sphere;
 
 constexpr double kDeg = M_PI / 180.0;
 
+// Unseen-class object pairs with their source disturbed at `level` (0..4).
+PairOptions UnseenPairs(DisturbanceKind disturbance, int level) {
+  PairOptions options;
+  options.split = ObjectSplit::kM2Unseen;
+  options.disturbance = disturbance;
+  options.disturbance_level = level;
+  return options;
+}
+
 // Refines 60 object pairs of `pair_options` (seeds 1000..1059) from the truth perturbed by
 // a..3a degrees and 0.01a..0.02a (a = min_angle_deg; 5: 5-15 degrees and 0.05-0.1, network-sized
 // errors) and counts those ending beyond (1 deg, 0.01); `check` also sees each result.
@@ -101,10 +110,8 @@ TEST(TreeRefinementTest, ObjectsConvergeFromNetworkSizedErrors) {
 // re-binned on the target's cells they compare the same parts of the surface
 // (TreeRefinementOptions::rebin_coarse_depths).
 TEST(TreeRefinementTest, RebinnedCoarseStagesReachTheTruthMoreOften) {
-  PairOptions pair_options;
-  pair_options.split = ObjectSplit::kM2Unseen;
-  pair_options.disturbance = DisturbanceKind::kJitter;  // 0.03: where the drift costs most
-  pair_options.disturbance_level = 2;
+  const PairOptions pair_options =
+      UnseenPairs(DisturbanceKind::kJitter, 2);  // 0.03: where the drift costs most
   auto failures = [&](bool rebin) {
     TreeRefinementOptions options;
     options.rebin_coarse_depths = rebin;
@@ -131,10 +138,8 @@ TEST(TreeRefinementTest, RebinnedCoarseStagesReachTheTruthMoreOften) {
 // coarse stages were pulled off the pose. Same starts as above, unseen objects. (Jitter 0.03
 // fails on 14 and 15 of these 60 either way from these starts; its gain shows in net+refine.)
 TEST(TreeRefinementTest, RebinnedDepthsCountingCellsResistOutliers) {
-  PairOptions pair_options;
-  pair_options.split = ObjectSplit::kM2Unseen;
-  pair_options.disturbance = DisturbanceKind::kUniformOutliers;
-  pair_options.disturbance_level = 4;  // 40% of the points
+  const PairOptions pair_options =
+      UnseenPairs(DisturbanceKind::kUniformOutliers, 4);  // 40% of the points
   auto failures = [&](WeightScheme coarse_weights) {
     TreeRefinementOptions options;
     options.coarse_weights = coarse_weights;
@@ -152,10 +157,7 @@ TEST(TreeRefinementTest, RebinnedDepthsCountingCellsResistOutliers) {
 // depth alone stopped where the coarser stages had left the pose. Unseen objects, jitter 0.05,
 // from 2-6 degree starts (the pose a converged coarse stage hands over) and from 5-15 degree ones.
 TEST(TreeRefinementTest, JointFinestStageHoldsJitteredPairsCloser) {
-  PairOptions pair_options;
-  pair_options.split = ObjectSplit::kM2Unseen;
-  pair_options.disturbance = DisturbanceKind::kJitter;
-  pair_options.disturbance_level = 3;  // 0.05
+  const PairOptions pair_options = UnseenPairs(DisturbanceKind::kJitter, 3);  // 0.05
   auto failures = [&](bool joint) {
     TreeRefinementOptions options;
     options.joint_finest_stage = joint;
@@ -183,10 +185,7 @@ TEST(TreeRefinementTest, JointFinestStageHoldsJitteredPairsCloser) {
 // searches, and the coarse stages settled short of the truth. Unseen objects, jitter 0.08, from
 // 2-6 and 5-15 degree starts.
 TEST(TreeRefinementTest, CoarseStagesSearchingTwoCellsHoldHeavyJitterCloser) {
-  PairOptions pair_options;
-  pair_options.split = ObjectSplit::kM2Unseen;
-  pair_options.disturbance = DisturbanceKind::kJitter;
-  pair_options.disturbance_level = 4;  // 0.08
+  const PairOptions pair_options = UnseenPairs(DisturbanceKind::kJitter, 4);  // 0.08
   auto failures = [&](const TreeRefinementOptions& options) {
     return FailuresFromPerturbedStarts(pair_options, options, 2.0) +
            FailuresFromPerturbedStarts(pair_options, options, 5.0);
