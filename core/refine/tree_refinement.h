@@ -184,9 +184,12 @@ struct TreeRefinementOptions {
   // crop 20% / 40% 0.75 / 0.61 -> 0.77 / 0.68, the others within three pairs (clean 0.855 ->
   // 0.850, outliers 20% 0.845 -> 0.830). KITTI-style K1 / K2 refine: the same recall (1.000) and
   // rotation RMSE within 0.01 degree (all before the confidence was refitted to it). Cost
-  // (registrar_bench, refinement inside net+refine): objects 4.0 -> 4.6 ms, scans 10.6 -> 11.2
-  // ms; the finest stage's coarser depth searching 2 cells as well gained another pair or two
-  // under jitter for as much again (5.2 ms, 12.2 ms), and every depth searching so 5.6, 13.7 ms.
+  // (registrar_bench's *CoarseOneCell rows against the default, interleaved,
+  // tests/bench/results/registrar_bench_coarse_search.txt): the refinement inside net+refine,
+  // objects 4.2 -> 5.0 ms and scans 10.7 -> 11.5 ms; refine from the identity 4.1 -> 5.5 and 10.6
+  // -> 11.4 ms. The finest stage's coarser depth searching two cells as well gained another pair
+  // or two under jitter for about as much again, and every depth searching so added nothing on
+  // scans at 30% more of their refinement (scratch runs).
   bool coarse_search_27_neighbors = true;
   double coarse_max_correspondence_distance_cells = 2.0;
   // Source nodes used per depth at most (an even stride over the Morton order keeps the spatial

@@ -79,13 +79,14 @@ const TreePairs& LidarTrees() {
 
 // `prepared`: each target prepared once beforehand (Registrar::PrepareTarget), as a caller that
 // registers many sources against one reference would; the preparation is not timed.
-// `joint_finest_stage` false: the refinement's finest depth alone (what the joint finest stage
-// costs, TreeRefinementOptions::joint_finest_stage).
+// `refinement`: the refinement's options (the *FinestAlone and *CoarseOneCell rows turn one of its
+// choices off to measure what it costs).
 void RunRegister(benchmark::State& state, const TreePairs& trees, bool prepared = false,
-                 const Registrar& registrar = SharedRegistrar(), bool joint_finest_stage = true) {
+                 const Registrar& registrar = SharedRegistrar(),
+                 const TreeRefinementOptions& refinement = {}) {
   RegistrationOptions options;
   options.mode = static_cast<RegistrationMode>(state.range(0));
-  options.refinement.joint_finest_stage = joint_finest_stage;
+  options.refinement = refinement;
   std::vector<std::shared_ptr<const PreparedTarget>> targets;
   for (size_t i = 0; prepared && i < trees.size(); ++i) {
     auto target = registrar.PrepareTarget(trees.trees[2 * i + 1]);
@@ -129,10 +130,33 @@ BENCHMARK(BM_RegisterObjects)
     ->Unit(benchmark::kMillisecond);
 
 // The same pairs with the finest depth refined alone (no coarser depth in the finest stage).
+TreeRefinementOptions FinestAlone() {
+  TreeRefinementOptions options;
+  options.joint_finest_stage = false;
+  return options;
+}
+// The same pairs with the coarse stages searching as the finest does (one cell, 2x2x2 block)
+// instead of two cells in the 3x3x3 block (TreeRefinementOptions::coarse_*).
+TreeRefinementOptions CoarseOneCell() {
+  TreeRefinementOptions options;
+  options.coarse_search_27_neighbors = options.search_27_neighbors;
+  options.coarse_max_correspondence_distance_cells = options.max_correspondence_distance_cells;
+  return options;
+}
+
 void BM_RegisterObjectsFinestAlone(benchmark::State& state) {
-  RunRegister(state, ObjectTrees(), false, SharedRegistrar(), /*joint_finest_stage=*/false);
+  RunRegister(state, ObjectTrees(), false, SharedRegistrar(), FinestAlone());
 }
 BENCHMARK(BM_RegisterObjectsFinestAlone)
+    ->ArgName("mode")
+    ->Arg(static_cast<int>(RegistrationMode::kNetRefine))
+    ->Arg(static_cast<int>(RegistrationMode::kRefine))
+    ->Unit(benchmark::kMillisecond);
+
+void BM_RegisterObjectsCoarseOneCell(benchmark::State& state) {
+  RunRegister(state, ObjectTrees(), false, SharedRegistrar(), CoarseOneCell());
+}
+BENCHMARK(BM_RegisterObjectsCoarseOneCell)
     ->ArgName("mode")
     ->Arg(static_cast<int>(RegistrationMode::kNetRefine))
     ->Arg(static_cast<int>(RegistrationMode::kRefine))
@@ -211,9 +235,18 @@ BENCHMARK(BM_RegisterLidar)
     ->Unit(benchmark::kMillisecond);
 
 void BM_RegisterLidarFinestAlone(benchmark::State& state) {
-  RunRegister(state, LidarTrees(), false, SharedRegistrar(), /*joint_finest_stage=*/false);
+  RunRegister(state, LidarTrees(), false, SharedRegistrar(), FinestAlone());
 }
 BENCHMARK(BM_RegisterLidarFinestAlone)
+    ->ArgName("mode")
+    ->Arg(static_cast<int>(RegistrationMode::kNetRefine))
+    ->Arg(static_cast<int>(RegistrationMode::kRefine))
+    ->Unit(benchmark::kMillisecond);
+
+void BM_RegisterLidarCoarseOneCell(benchmark::State& state) {
+  RunRegister(state, LidarTrees(), false, SharedRegistrar(), CoarseOneCell());
+}
+BENCHMARK(BM_RegisterLidarCoarseOneCell)
     ->ArgName("mode")
     ->Arg(static_cast<int>(RegistrationMode::kNetRefine))
     ->Arg(static_cast<int>(RegistrationMode::kRefine))
