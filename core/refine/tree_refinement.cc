@@ -762,7 +762,8 @@ constexpr int kRebinFromDepthsBelow = 3;
 
 // The options of a stage on re-binned cells: the coarse covariance epsilon and weights; and for
 // a coarse stage itself (not the joint finest stage's coarser depth, which polishes within a
-// cell) the coarse correspondence search.
+// cell) the coarse correspondence search. (The joint stage's coarser depth then takes
+// joint_coarser_weights.)
 TreeRefinementOptions RebinnedStageOptions(const TreeRefinementOptions& options,
                                            bool coarse_search) {
   TreeRefinementOptions out = options;
@@ -1027,6 +1028,7 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
           CoarserDepth& c = coarser.emplace();
           c.cells = *std::move(cells);
           c.options = RebinnedStageOptions(options, /*coarse_search=*/false);
+          c.options.weights = options.joint_coarser_weights;
           PrepareSourceDepth(c.cells, depth - 1, c.options, c.side);
           c.data = MakeDepthData(c.side, shared.Target(depth - 1, c.options), c.options);
           c.R0 = R;

@@ -251,6 +251,49 @@ TEST(TreeRefinementTest, SimulatedLidarPairFiveFramesApartFromIdentity) {
   EXPECT_GT(result->fitness, 0.3);
 }
 
+// Consecutive frames of a simulated 10 Hz suburban sequence, each refined from the previous
+// frame's true motion (what `rpsr odometry` does with its estimate), as the joint finest stage's
+// coarser depth weighs its cells by inverse density (the default) or counts them: counted, the
+// re-binned cells near the sensor, holding arcs of the rings that move with it, pulled every
+// estimate the same way and odometry drifted (TreeRefinementOptions::joint_coarser_weights).
+// Here the mean error vector a frame is 1.61 mm counted and 0.45 mm by inverse density.
+TEST(TreeRefinementTest, JointStageCoarserDepthDoesNotPullConsecutiveScans) {
+  LidarSequenceOptions options;
+  options.style = StreetStyle::kSuburban;
+  options.frame_count = 25;
+  options.seed = 11;
+  auto sequence = LidarSequenceSimulator::Create(options);
+  ASSERT_TRUE(sequence.ok()) << sequence.status();
+  std::vector<Octree> trees;
+  for (int f = 0; f < options.frame_count; ++f) {
+    trees.push_back(RefinementTree(sequence->SimulateFrame(f).cloud, 9));
+  }
+  const auto& poses = sequence->T_world_lidar();
+  // The length of the mean error vector of the translations (mm): what adds up along a trajectory
+  // (noise averages out of it).
+  auto bias_mm = [&](WeightScheme weights) {
+    TreeRefinementOptions refinement;
+    refinement.joint_coarser_weights = weights;
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    for (int f = 2; f < options.frame_count; ++f) {
+      const Eigen::Isometry3d truth = poses[f - 1].inverse() * poses[f];
+      const Eigen::Isometry3d previous = poses[f - 2].inverse() * poses[f - 1];
+      auto result = RefineOnTrees(trees[f], trees[f - 1], previous, refinement);
+      EXPECT_TRUE(result.ok()) << result.status();
+      sum += 1e3 * (result->T_target_source.translation() - truth.translation());
+    }
+    return (sum / (options.frame_count - 2)).norm();
+  };
+  EXPECT_EQ(TreeRefinementOptions{}.joint_coarser_weights, WeightScheme::kInverseDensity);
+  const double counted = bias_mm(WeightScheme::kUniform);
+  const double inverse_density = bias_mm(WeightScheme::kInverseDensity);
+  std::printf(
+      "mean translation error vector a frame: cells counted %.2f mm, inverse density %.2f "
+      "mm\n",
+      counted, inverse_density);
+  EXPECT_LT(inverse_density, 0.5 * counted);
+}
+
 // Points on z = 0 (a square), on two walls and a floor of a corridor along x, on a sphere.
 struct DegenerateCase {
   std::string name;
