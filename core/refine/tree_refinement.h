@@ -120,7 +120,8 @@ struct TreeRefinementOptions {
   // translation error over 50-100 m segments; 300 suburban frames over 100-200 m): suburban 1.20%
   // -> 0.29%, parking lot 2.81% -> 1.36%, urban 0.50% -> 0.51% (without the joint stage 0.28%,
   // 1.48%, 0.59%); objects within three pairs per setting (200 seed-2 unseen pairs a setting;
-  // held-out calibration set objects net+refine 801 -> 803 of 1,008, LiDAR 122 -> 123 of 128);
+  // held-out calibration set objects net+refine 801 -> 803 of 1,008 (802 refitted), LiDAR 122 ->
+  // 123 of 128);
   // but KITTI-style pairs five frames apart refined from the identity lose some precision: rotation
   // / translation RMSE 0.056 deg / 0.0042 m -> 0.099 / 0.0080 (ground kept), 0.158 / 0.025 -> 0.169
   // / 0.030 (removed), still within the 0.2 degree / 0.10 m goal.
