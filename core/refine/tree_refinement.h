@@ -198,11 +198,11 @@ struct TreeRefinementOptions {
   // 0.850, outliers 20% 0.845 -> 0.830). KITTI-style K1 / K2 refine: the same recall (1.000) and
   // rotation RMSE within 0.01 degree (all before the confidence was refitted to it). Cost
   // (registrar_bench's *CoarseOneCell rows against the default, interleaved,
-  // tests/bench/results/registrar_bench_coarse_search.txt, with joint_coarser_weights below): the
+  // tests/bench/results/registrar_bench_coarse_search.txt, with joint_coarser_weights above): the
   // refinement inside net+refine, objects 4.1 -> 5.2 ms and scans 11.6 -> 12.0 ms; refine from the
-  // identity 3.9 -> 5.4 and 11.1 -> 11.9 ms. The finest stage's coarser depth searching two cells as well gained another pair
-  // or two under jitter for about as much again, and every depth searching so added nothing on
-  // scans at 30% more of their refinement (scratch runs).
+  // identity 3.9 -> 5.4 and 11.1 -> 11.9 ms. The finest stage's coarser depth searching two cells
+  // as well gained another pair or two under jitter for about as much again, and every depth
+  // searching so added nothing on scans at 30% more of their refinement (scratch runs).
   bool coarse_search_27_neighbors = true;
   double coarse_max_correspondence_distance_cells = 2.0;
   // Source nodes used per depth at most (an even stride over the Morton order keeps the spatial
