@@ -482,9 +482,6 @@ struct Linearization {
   // Sum of the correspondences' final weights (the spread's normaliser), the coarser depth's too.
   double weight_sum = 0.0;
   double coarser_weight_sum = 0.0;
-  // H, b and spread are assembled (AddSystem); false for a step-controlled candidate until it is
-  // accepted.
-  bool has_system = false;
 
   double step_cost() const { return cost + coarser_cost; }
 };
@@ -502,7 +499,6 @@ double InlierRmseOf(const Linearization& lin) {
 // most candidate steps (three in four on objects) by their cost alone, and this loop is a large
 // share of a linearisation.
 void AddSystem(const std::vector<Correspondence>& corr, Linearization& lin) {
-  lin.has_system = true;
   if (!(lin.weight_sum > 0.0)) return;
   // With J = [[a]x, -I] (a = moved CoM about the centre) and W = weight * information, written
   // out in 3x3 blocks: with Q = [a]x W, J^T W J is [[-Q [a]x, Q], [Q^T, W]] and J^T W r is
@@ -760,19 +756,24 @@ constexpr double kRebinAgainCells = 0.25;
 // A re-binned depth d is built from the source's nodes at depth min(finest, d + this).
 constexpr int kRebinFromDepthsBelow = 3;
 
-// The options of a stage on re-binned cells: the coarse covariance epsilon and weights; and for
-// a coarse stage itself (not the joint finest stage's coarser depth, which polishes within a
-// cell) the coarse correspondence search. (The joint stage's coarser depth then takes
-// joint_coarser_weights.)
-TreeRefinementOptions RebinnedStageOptions(const TreeRefinementOptions& options,
-                                           bool coarse_search) {
+// The options of a coarse stage on re-binned cells: the coarse covariance epsilon, weights and
+// correspondence search.
+TreeRefinementOptions RebinnedStageOptions(const TreeRefinementOptions& options) {
   TreeRefinementOptions out = options;
   out.covariance_epsilon = options.coarse_covariance_epsilon;
   out.weights = options.coarse_weights;
-  if (coarse_search) {
-    out.search_27_neighbors = options.coarse_search_27_neighbors;
-    out.max_correspondence_distance_cells = options.coarse_max_correspondence_distance_cells;
-  }
+  out.search_27_neighbors = options.coarse_search_27_neighbors;
+  out.max_correspondence_distance_cells = options.coarse_max_correspondence_distance_cells;
+  return out;
+}
+
+// The options of the joint finest stage's coarser depth: re-binned cells (the coarse covariance
+// epsilon) weighed by joint_coarser_weights, searched as the finest depth is (it polishes within
+// a cell).
+TreeRefinementOptions JointCoarserDepthOptions(const TreeRefinementOptions& options) {
+  TreeRefinementOptions out = options;
+  out.covariance_epsilon = options.coarse_covariance_epsilon;
+  out.weights = options.joint_coarser_weights;
   return out;
 }
 
@@ -783,7 +784,7 @@ struct CoarserDepth {
   Octree cells;  // the re-binned source
   SourceDepth side;
   DepthData data;
-  TreeRefinementOptions options;  // RebinnedStageOptions
+  TreeRefinementOptions options;  // JointCoarserDepthOptions
   Eigen::Matrix3d R0 = Eigen::Matrix3d::Identity();
   Eigen::Vector3d t0 = Eigen::Vector3d::Zero();
   std::vector<Correspondence> corr;
@@ -811,10 +812,10 @@ Linearization LinearizeStage(const Octree& source, const Octree& target, DepthDa
   return lin;
 }
 
-// Adds H and b to a linearisation made without them, from the correspondences it left.
+// Adds H and b to a linearisation made without them (LinearizeStage's with_system false), from
+// the correspondences it left.
 void CompleteStageSystem(const std::vector<Correspondence>& corr, CoarserDepth* coarser,
                          Linearization& lin) {
-  if (lin.has_system) return;
   AddSystem(corr, lin);
   if (coarser == nullptr || lin.correspondences == 0) return;
   Linearization c;
@@ -898,7 +899,7 @@ StageOutcome RunStage(const Octree& source, const Octree& target, DepthData& dat
     }
     R = next_R;
     t = next_t;
-    CompleteStageSystem(corr, coarser, next);
+    if (controlled) CompleteStageSystem(corr, coarser, next);
     lin = std::move(next);
     stage.correspondences = lin.correspondences;
     stage.coarser_correspondences = lin.coarser_correspondences;
@@ -1000,8 +1001,7 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
       const Octree& stage_source = rebin ? *rebinned : source;
       Eigen::Matrix3d stage_R = rebin ? Eigen::Matrix3d::Identity() : R;
       Eigen::Vector3d stage_t = rebin ? Eigen::Vector3d::Zero() : t;
-      const TreeRefinementOptions stage_options =
-          rebin ? RebinnedStageOptions(options, /*coarse_search=*/true) : options;
+      const TreeRefinementOptions stage_options = rebin ? RebinnedStageOptions(options) : options;
       // Re-binned cells are new at every round; the source's own cells and the target's side
       // come from the cache (shared with the other rounds and starts).
       std::optional<SourceDepth> rebinned_side;
@@ -1027,8 +1027,7 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
         if (cells.ok()) {  // else nothing of the source is inside the target's cube: finest alone
           CoarserDepth& c = coarser.emplace();
           c.cells = *std::move(cells);
-          c.options = RebinnedStageOptions(options, /*coarse_search=*/false);
-          c.options.weights = options.joint_coarser_weights;
+          c.options = JointCoarserDepthOptions(options);
           PrepareSourceDepth(c.cells, depth - 1, c.options, c.side);
           c.data = MakeDepthData(c.side, shared.Target(depth - 1, c.options), c.options);
           c.R0 = R;

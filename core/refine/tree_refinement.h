@@ -109,7 +109,13 @@ struct TreeRefinementOptions {
   // identity, rotation / translation RMSE 0.168 deg / 0.033 m -> 0.157 / 0.025 (ground removed)
   // and 0.110 / 0.0095 -> 0.064 / 0.0040 (kept). It costs a second linearisation per finest
   // iteration: objects refine 3.5 -> 4.7 ms, 120k-point scans 10.3 -> 12.3 ms (registrar_bench,
-  // BM_Register*FinestAlone against BM_Register*).
+  // BM_Register*FinestAlone against BM_Register*). All measured when it was introduced, its
+  // coarser depth then counting cells. With the two-cell coarse search and joint_coarser_weights
+  // below: jitter 0.03 / 0.05 / 0.08 0.765 / 0.465 / 0.13 -> 0.79 / 0.515 / 0.175 on the same 200
+  // pairs a setting (the others within two pairs); KITTI-style rotation / translation RMSE 0.167
+  // / 0.033 -> 0.169 / 0.030 (removed), 0.104 / 0.0094 -> 0.099 / 0.0080 (kept); the refinement
+  // inside net+refine 4.0 -> 5.2 ms an object, 10.5 -> 12.0 ms a scan
+  // (tests/bench/results/registrar_bench_coarse_search.txt).
   // The information the result reports is that of the joint cost (both depths), the estimate's
   // own; fitness and inlier RMSE stay the finest depth's.
   bool joint_finest_stage = true;

@@ -13,16 +13,20 @@
 //     classes, rotations up to 45 degrees per axis, 1,024 points, the same seeds per index as
 //     `rpsr eval` (so its pairs are the first --count of `rpsr eval --study`): clean and each
 //     disturbance at 20% (noise and outliers: 20% of the points, level 3; crop: 20%, level 2;
-//     jitter has no fraction: its training tolerance 0.03, level 2);
+//     jitter has no fraction: its training tolerance 0.03, level 2), or with --levels each
+//     disturbance at every listed level;
 //   --protocol lidar: pairs i -> i+5 of the test block (core/data/lidar_pairs.h) of simulated
 //     HDL-64E sequences written in the KITTI layout under --work_dir (or of --kitti, a real or
 //     simulated KITTI root), with ground removed (K1-w/o) and kept (K2-w).
 //
-// The commands that wrote tests/bench/results/peers_objects.* and peers_lidar.* (from the
-// repository root, Release build in build/; each one line; OMP_NUM_THREADS=1 only restates what
-// the driver sets):
+// The commands that wrote tests/bench/results/peers_objects.*, peers_objects_levels.* and
+// peers_lidar.* (from the repository root, Release build in build/; each one line;
+// OMP_NUM_THREADS=1 only restates what the driver sets):
 //   OMP_NUM_THREADS=1 OMP_WAIT_POLICY=PASSIVE build/tests/bench/peers/peer_comparison
-//       --protocol objects --count 50 --output tests/bench/results/peers_objects
+//       --protocol objects --count 200 --output tests/bench/results/peers_objects
+//   OMP_NUM_THREADS=1 OMP_WAIT_POLICY=PASSIVE build/tests/bench/peers/peer_comparison
+//       --protocol objects --count 100 --levels 0,1,2,3,4
+//       --output tests/bench/results/peers_objects_levels
 //   OMP_NUM_THREADS=1 OMP_WAIT_POLICY=PASSIVE build/tests/bench/peers/peer_comparison
 //       --protocol lidar --lidar_pairs 20 --output tests/bench/results/peers_lidar
 //
