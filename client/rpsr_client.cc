@@ -101,6 +101,7 @@ RegistrationResult FromProto(const rpsr::v1::RegistrationResult& in) {
     out.degenerate_axes[i] = in.degenerate_axes(i);
   }
   out.num_degenerate = in.num_degenerate();
+  out.held_at_initial = in.held_at_initial();
   out.net_T_target_source = FromProto(in.net_transform_target_source());
   out.net_score_peak = in.net_score_peak();
   out.start = in.start();
@@ -123,6 +124,7 @@ void ToProto(const RegisterOptions& in, rpsr::v1::RegisterOptions* out) {
   out->set_search_scene_start(in.search_scene_start);
   out->set_rebin_coarse_depths(in.rebin_coarse_depths);
   out->set_joint_finest_stage(in.joint_finest_stage);
+  out->set_hold_degenerate_at_initial(in.hold_degenerate_at_initial);
 }
 
 double SecondsSince(std::chrono::steady_clock::time_point start) {

@@ -151,6 +151,10 @@ struct RegisterOptions {
   bool rebin_coarse_depths = true;
   // With it, the finest stage also fits the next coarser depth (proto RegisterOptions).
   bool joint_finest_stage = true;
+  // With initial_T_target_source: a degenerate answer keeps the guess along the unconstrained
+  // directions (proto RegisterOptions.hold_degenerate_at_initial; RegistrationResult::
+  // held_at_initial).
+  bool hold_degenerate_at_initial = true;
   // The gRPC deadline of this call; zero: ClientOptions::default_deadline.
   absl::Duration timeout = absl::ZeroDuration();
 };
@@ -181,6 +185,8 @@ struct RegistrationResult {
   Eigen::Matrix<double, 6, 6> information = Eigen::Matrix<double, 6, 6>::Zero();
   std::array<bool, 6> degenerate_axes = {};  // rotation x, y, z, translation x, y, z
   int num_degenerate = 0;
+  // The pose along the degenerate directions is the initial guess's (hold_degenerate_at_initial).
+  bool held_at_initial = false;
   Eigen::Isometry3d net_T_target_source = Eigen::Isometry3d::Identity();
   double net_score_peak = 0.0;
   std::string mode;

@@ -103,6 +103,9 @@ absl::StatusOr<core::RegistrationOptions> OptionsFromProto(const v1::RegisterOpt
   if (proto.has_joint_finest_stage()) {
     options.refinement.joint_finest_stage = proto.joint_finest_stage();
   }
+  if (proto.has_hold_degenerate_at_initial()) {
+    options.hold_degenerate_at_initial = proto.hold_degenerate_at_initial();
+  }
   return options;
 }
 
@@ -123,6 +126,7 @@ void ResultToProto(const core::RegistrationResult& result, v1::RegistrationResul
   }
   proto->clear_degenerate_axes();
   for (bool axis : result.degenerate_axes) proto->add_degenerate_axes(axis);
+  proto->set_held_at_initial(result.held_at_initial);
   proto->set_num_degenerate(result.num_degenerate);
   TransformToProto(result.net_T_target_source, proto->mutable_net_transform_target_source());
   proto->set_net_score_peak(result.net_score_peak);

@@ -213,6 +213,7 @@ absl::StatusOr<std::vector<Step>> RunLocally(const std::vector<std::string>& fra
   options.search_scene_start = absl::GetFlag(FLAGS_search_scene_start);
   options.refinement.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
   options.refinement.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);
+  options.hold_degenerate_at_initial = absl::GetFlag(FLAGS_hold_degenerate_at_initial);
   const bool constant_velocity = absl::GetFlag(FLAGS_constant_velocity);
   FrameProgress progress(static_cast<int>(frames.size()));
   for (size_t i = 1; i < frames.size(); ++i) {
@@ -275,6 +276,8 @@ absl::StatusOr<std::vector<Step>> RunOnServer(const std::vector<std::string>& fr
   tracker_options.registration.search_scene_start = absl::GetFlag(FLAGS_search_scene_start);
   tracker_options.registration.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
   tracker_options.registration.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);
+  tracker_options.registration.hold_degenerate_at_initial =
+      absl::GetFlag(FLAGS_hold_degenerate_at_initial);
   tracker_options.constant_velocity_prior = absl::GetFlag(FLAGS_constant_velocity);
   absl::StatusOr<std::unique_ptr<Tracker>> tracker = (*session)->StartTracker(tracker_options);
   if (!tracker.ok()) return tracker.status();

@@ -629,7 +629,9 @@ void AnalyseDegeneracy(const Linearization& lin, const TreeRefinementOptions& op
   // direction into a displacement in metres, so the six eigenvalues are comparable.
   Vector6d s = Vector6d::Ones();
   for (int a = 0; a < 3; ++a) {
-    s[a] = 1.0 / std::sqrt(std::max(lin.spread.trace() - lin.spread(a, a), 1e-24));
+    result.rotation_lever_arms[a] =
+        std::sqrt(std::max(lin.spread.trace() - lin.spread(a, a), 1e-24));
+    s[a] = 1.0 / result.rotation_lever_arms[a];
   }
   const Matrix6d scaled = s.asDiagonal() * result.information * s.asDiagonal();
   Eigen::SelfAdjointEigenSolver<Matrix6d> solver(scaled);

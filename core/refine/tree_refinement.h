@@ -308,6 +308,10 @@ struct TreeRefinementResult {
   // that degenerate subspace. Axes ordered as `information`.
   Eigen::Matrix<double, 6, 1> normalized_eigenvalues = Eigen::Matrix<double, 6, 1>::Zero();
   Eigen::MatrixXd degenerate_directions;
+  // The RMS lever arms (metres) of the matched points about the axes through
+  // information_center, by which the directions' rotation rows are scaled (radians x lever arm =
+  // metres); what HoldDegenerateDirections needs to read them back.
+  Eigen::Vector3d rotation_lever_arms = Eigen::Vector3d::Ones();
   std::array<bool, 6> degenerate_axes = {};
   int num_degenerate = 0;
   std::vector<DepthStage> stages;  // coarse to fine

@@ -16,6 +16,7 @@
 #include "core/io/file_bytes.h"
 #include "core/net/rpsr_net.h"
 #include "core/refine/correlative_start.h"
+#include "core/refine/degenerate_hold.h"
 #include "core/registrar/confidence_model.h"
 #include "core/registrar/embedded_models.h"
 
@@ -354,6 +355,13 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
     if (searched.ok() && (searched->score > searched->initial_score || !refined_from_initial)) {
       try_start(searched->T_target_source, "searched");
     }
+  }
+  if (options.hold_degenerate_at_initial && options.initial_T_target_source.has_value() &&
+      best.num_degenerate > 0) {
+    result.T_target_source = HoldDegenerateDirections(best, *options.initial_T_target_source);
+    result.held_at_initial = true;
+    absl::StrAppend(&result.failure_reason,
+                    "; along the unconstrained direction(s) the pose is the initial guess's");
   }
   result.timings.refine_seconds = SecondsSince(refine_start) - confidence_seconds;
   result.timings.confidence_seconds = confidence_seconds;

@@ -27,6 +27,7 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "server/rpsr_server.h"
+#include "tests/core/refine/refinement_test_geometry.h"
 
 namespace rpsr::client {
 namespace {
@@ -264,6 +265,32 @@ TEST_F(RpsrClientTest, TrackerComposesRelativePoses) {
   EXPECT_LT(error.translation, 0.1);
   EXPECT_TRUE(second->T_frame0_current.isApprox(second->relative->T_target_source, 1e-9));
   EXPECT_TRUE((*tracker)->Finish().ok());
+}
+
+// RegisterOptions::hold_degenerate_at_initial reaches the server and held_at_initial comes back:
+// a corridor along x from a guess 0.6 m along it keeps the guess's 0.6 m there.
+TEST_F(RpsrClientTest, DegenerateAnswersHoldTheGuessAlongTheCorridor) {
+  std::unique_ptr<Client> client = Connect();
+  absl::StatusOr<std::unique_ptr<Session>> session = client->CreateSession();
+  ASSERT_TRUE(session.ok()) << session.status();
+  const core::PointCloud source = core::testing_util::Corridor(8000, 1);
+  const core::PointCloud target = core::testing_util::Corridor(8000, 2);
+  RegisterOptions options;
+  options.mode = "refine";
+  Eigen::Isometry3d guess = Eigen::Isometry3d::Identity();
+  guess.translation() = Eigen::Vector3d(0.6, 0.15, 0.0);
+  options.initial_T_target_source = guess;
+  absl::StatusOr<RegistrationResult> held =
+      (*session)->Register(source.points, target.points, options);
+  ASSERT_TRUE(held.ok()) << held.status();
+  EXPECT_FALSE(held->valid);
+  EXPECT_TRUE(held->held_at_initial) << held->failure_reason;
+  EXPECT_NEAR(held->T_target_source.translation().x(), 0.6, 1e-3);
+  options.hold_degenerate_at_initial = false;
+  absl::StatusOr<RegistrationResult> free =
+      (*session)->Register(source.points, target.points, options);
+  ASSERT_TRUE(free.ok()) << free.status();
+  EXPECT_FALSE(free->held_at_initial);
 }
 
 TEST(RpsrClientRecoveryTest, EvictedCloudsAreUploadedAgain) {

@@ -90,6 +90,17 @@ TEST(ProtoConvertTest, JointFinestStageIsOnUnlessTurnedOff) {
   EXPECT_FALSE(options->refinement.joint_finest_stage);
 }
 
+TEST(ProtoConvertTest, HoldingDegenerateDirectionsAtTheGuessIsOnUnlessTurnedOff) {
+  auto options = OptionsFromProto({});
+  ASSERT_TRUE(options.ok());
+  EXPECT_TRUE(options->hold_degenerate_at_initial);
+  v1::RegisterOptions proto;
+  proto.set_hold_degenerate_at_initial(false);
+  options = OptionsFromProto(proto);
+  ASSERT_TRUE(options.ok());
+  EXPECT_FALSE(options->hold_degenerate_at_initial);
+}
+
 // The later starts are on unless a client says otherwise (proto3 optional: absent is not false).
 TEST(ProtoConvertTest, LaterStartsAreOnUnlessTurnedOff) {
   auto options = OptionsFromProto({});
@@ -117,6 +128,7 @@ TEST(ProtoConvertTest, ResultCarriesEverythingTheRegistrarSays) {
   result.information(3, 4) = 7.0;
   result.degenerate_axes[3] = true;
   result.num_degenerate = 1;
+  result.held_at_initial = true;
   result.mode = core::RegistrationMode::kRefine;
   result.timings.refine_seconds = 0.004;
   result.start = "searched";
@@ -129,6 +141,7 @@ TEST(ProtoConvertTest, ResultCarriesEverythingTheRegistrarSays) {
   EXPECT_EQ(proto.information(3 * 6 + 4), 7.0);
   ASSERT_EQ(proto.degenerate_axes_size(), 6);
   EXPECT_TRUE(proto.degenerate_axes(3));
+  EXPECT_TRUE(proto.held_at_initial());
   EXPECT_EQ(proto.mode(), "refine");
   EXPECT_EQ(proto.timings().refine_seconds(), 0.004);
   EXPECT_EQ(proto.start(), "searched");

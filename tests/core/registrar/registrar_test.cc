@@ -25,6 +25,7 @@ namespace {
 
 using ::testing::Contains;
 using ::testing::HasSubstr;
+using ::testing::Not;
 using testing_util::AsymmetricObjectPair;
 using testing_util::Perturbed;
 using testing_util::SharedRegistrar;
@@ -419,6 +420,42 @@ TEST(RegistrarDegenerateTest, PlaneCorridorAndSphereAreNeverConfident) {
       EXPECT_LE(result->confidence, 0.05) << where;
     }
   }
+}
+
+// RegistrationOptions::hold_degenerate_at_initial: a corridor along x registered from a guess off
+// by 0.6 m along it and 0.15 m across. Along the corridor nothing measures the shift, so the
+// answer keeps the guess's 0.6 m there (and says so); across it the refinement corrects the guess.
+TEST(RegistrarDegenerateTest, CorridorKeepsTheInitialGuessAlongItsLength) {
+  const Octree source = TreeOf(testing_util::Corridor(8000, 1));
+  const Octree target = TreeOf(testing_util::Corridor(8000, 2));  // the truth is the identity
+  RegistrationOptions options;
+  options.mode = RegistrationMode::kRefine;
+  const Eigen::Vector3d guess(0.6, 0.15, 0.0);
+  options.initial_T_target_source = MakeTransform(Eigen::Matrix3d::Identity(), guess);
+  auto held = SharedRegistrar().Register(source, target, options);
+  ASSERT_TRUE(held.ok()) << held.status();
+  EXPECT_FALSE(held->valid);
+  EXPECT_TRUE(held->degenerate_axes[3]) << held->failure_reason;
+  EXPECT_TRUE(held->held_at_initial);
+  EXPECT_THAT(held->failure_reason, HasSubstr("initial guess"));
+  const Eigen::Vector3d t = held->T_target_source.translation();
+  EXPECT_NEAR(t.x(), guess.x(), 1e-3);
+  EXPECT_LT(std::abs(t.y()), 0.03) << "across the corridor the walls measure the shift";
+  EXPECT_LT(std::abs(t.z()), 0.03);
+  EXPECT_LT(ErrorOf(held->T_target_source, Eigen::Isometry3d::Identity()).rotation_deg, 0.2);
+
+  // Switched off, or without a guess, the refinement's answer is returned as it is.
+  options.hold_degenerate_at_initial = false;
+  auto free = SharedRegistrar().Register(source, target, options);
+  ASSERT_TRUE(free.ok()) << free.status();
+  EXPECT_FALSE(free->held_at_initial);
+  EXPECT_THAT(free->failure_reason, Not(HasSubstr("initial guess")));
+  EXPECT_LT(std::abs(free->T_target_source.translation().y()), 0.03);
+  options.hold_degenerate_at_initial = true;
+  options.initial_T_target_source.reset();
+  auto unguided = SharedRegistrar().Register(source, target, options);
+  ASSERT_TRUE(unguided.ok()) << unguided.status();
+  EXPECT_FALSE(unguided->held_at_initial);
 }
 
 }  // namespace

@@ -1,0 +1,26 @@
+// Solution remapping for degenerate geometry (issue 5; Zhang, Kaess and Singh, "On degeneracy of
+// optimization-based state estimation problems", ICRA 2016): where the refinement's information
+// says a direction is unconstrained (a road between guard rails along its length, a plane in its
+// own plane, a sphere about its centre), the refined pose's component along it is the drift of
+// noise and bias, not a measurement. A caller with a prior (a tracker's constant-velocity guess)
+// does better keeping the prior's component there and the refinement's everywhere else.
+#ifndef RPSR_CORE_REFINE_DEGENERATE_HOLD_H_
+#define RPSR_CORE_REFINE_DEGENERATE_HOLD_H_
+
+#include "Eigen/Geometry"
+#include "core/refine/tree_refinement.h"
+
+namespace rpsr::core {
+
+// `refined.T_target_source` with its motion relative to `prior` (both T_target_source) projected
+// off the degenerate directions: the motion D = T prior^-1 is written in the refinement's own
+// perturbation (TreeRefinementResult::information: rotation w about information_center, then a
+// translation v, in the target frame), the rotation part scaled to metres by the lever arms as the
+// directions are, its components along `degenerate_directions` removed, and the remainder applied
+// to `prior`. With no degenerate direction it returns refined.T_target_source unchanged.
+Eigen::Isometry3d HoldDegenerateDirections(const TreeRefinementResult& refined,
+                                           const Eigen::Isometry3d& prior);
+
+}  // namespace rpsr::core
+
+#endif  // RPSR_CORE_REFINE_DEGENERATE_HOLD_H_
