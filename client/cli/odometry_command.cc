@@ -158,6 +158,9 @@ struct Step {
   Eigen::Isometry3d T_previous_current = Eigen::Isometry3d::Identity();
   bool valid = false;
   double confidence = 0.0;
+  // Invalid, but held at the previous motion along its degenerate directions
+  // (--hold_degenerate_at_initial).
+  bool held = false;
   // Where the time of a frame went: the registrar's share, and (on a server) the whole round trip
   // of the frame (upload, tree, registration, answer) as the client saw it.
   double registrar_seconds = 0.0;
@@ -239,7 +242,7 @@ absl::StatusOr<std::vector<Step>> RunLocally(const std::vector<std::string>& fra
                           absl::StrCat("frame ", i, ": ", result.status().message()));
     }
     steps.push_back({result->T_target_source, result->valid, result->confidence,
-                     result->timings.total_seconds, 0.0});
+                     result->held_at_initial, result->timings.total_seconds, 0.0});
     // An invalid step keeps the last good motion as the next start.
     if (result->valid) motion = result->T_target_source;
     previous = *std::move(current);
@@ -297,8 +300,8 @@ absl::StatusOr<std::vector<Step>> RunOnServer(const std::vector<std::string>& fr
         return absl::InternalError(absl::StrCat("frame ", i, ": the server sent no pose"));
       }
       steps.push_back({frame->relative->T_target_source, frame->relative->valid,
-                       frame->relative->confidence, frame->relative->timings.registrar_seconds,
-                       frame->round_trip_seconds});
+                       frame->relative->confidence, frame->relative->held_at_initial,
+                       frame->relative->timings.registrar_seconds, frame->round_trip_seconds});
     }
     if (!quiet) progress.Update(static_cast<int>(i + 1));
   }
@@ -378,11 +381,13 @@ int RunOdometryCommand(const std::vector<std::string>& args) {
   // LiDAR poses from the steps, then camera 0 poses when Tr is known (KITTI's convention).
   std::vector<Eigen::Isometry3d> T_world_lidar = {Eigen::Isometry3d::Identity()};
   int invalid = 0;
+  int held = 0;
   double registrar_seconds = 0.0;
   double round_trip_seconds = 0.0;
   for (const Step& step : *steps) {
     T_world_lidar.push_back(T_world_lidar.back() * step.T_previous_current);
     if (!step.valid) ++invalid;
+    if (step.held) ++held;
     registrar_seconds += step.registrar_seconds;
     round_trip_seconds += step.round_trip_seconds;
   }
@@ -422,12 +427,13 @@ int RunOdometryCommand(const std::vector<std::string>& args) {
   if (json) {
     std::printf(
         "{\"sequence\": %s, \"where\": %s, \"frames\": %d, \"pairs\": %d, \"invalid_pairs\": %d, "
+        "\"held_pairs\": %d, "
         "\"seconds\": %.3f, \"ms_per_pair\": %.3f, \"registrar_ms_per_pair\": %.3f, "
         "\"round_trip_ms_per_frame\": %.3f, \"poses\": %s, \"pose_frame\": %s, \"plot\": "
         "%s, \"metrics\": %s}\n",
         JsonString(sequence_dir.string()).c_str(),
         JsonString(*use_server ? absl::GetFlag(FLAGS_server) : "local").c_str(), frame_count, pairs,
-        invalid, seconds, 1e3 * seconds / pairs, 1e3 * registrar_seconds / pairs,
+        invalid, held, seconds, 1e3 * seconds / pairs, 1e3 * registrar_seconds / pairs,
         1e3 * round_trip_seconds / pairs, JsonString(output).c_str(),
         JsonString(truth.T_camera_lidar ? "camera0" : "lidar").c_str(),
         JsonString(plot == "none" ? "" : plot).c_str(),
@@ -438,13 +444,16 @@ int RunOdometryCommand(const std::vector<std::string>& args) {
               *use_server ? ("server " + absl::GetFlag(FLAGS_server)).c_str() : "local");
   std::printf(
       "registered %d pairs in %.1f s (%.1f ms a pair, of which the registrar %.1f ms%s), "
-      "%d not valid\n",
+      "%d not valid%s\n",
       pairs, seconds, 1e3 * seconds / pairs, 1e3 * registrar_seconds / pairs,
       *use_server
           ? absl::StrFormat("; %.1f ms a frame's round trip", 1e3 * round_trip_seconds / pairs)
                 .c_str()
           : "",
-      invalid);
+      invalid,
+      held > 0 ? absl::StrFormat(" (%d degenerate, held at the previous motion along it)", held)
+                     .c_str()
+               : "");
   std::printf("poses (%s, KITTI format) written to %s\n",
               truth.T_camera_lidar ? "camera 0 frame" : "LiDAR frame", output.c_str());
   if (metrics) {
