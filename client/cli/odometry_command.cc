@@ -451,9 +451,9 @@ int RunOdometryCommand(const std::vector<std::string>& args) {
                 .c_str()
           : "",
       invalid,
-      held > 0 ? absl::StrFormat(" (%d degenerate, held at the previous motion along it)", held)
-                     .c_str()
-               : "");
+      held > 0
+          ? absl::StrFormat(" (%d degenerate, held at the previous motion along it)", held).c_str()
+          : "");
   std::printf("poses (%s, KITTI format) written to %s\n",
               truth.T_camera_lidar ? "camera 0 frame" : "LiDAR frame", output.c_str());
   if (metrics) {

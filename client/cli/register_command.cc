@@ -2,9 +2,11 @@
 // core/io reads: .ply .pcd .xyz .txt .csv .bin .off) and prints T_target_source (R, t, the
 // quaternion), its validity and confidence; --output_aligned writes the source moved into the
 // target's frame; --json prints one JSON object instead.
-// Exit codes: 0 valid, 3 registered but not valid, 1 failure (files, server), 2 bad flags.
+// --initial gives a starting guess. Exit codes: 0 valid, 3 registered but not valid, 1 failure
+// (files, server), 2 bad flags.
 #include <chrono>
 #include <cstdio>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -26,6 +28,11 @@ ABSL_FLAG(std::string, output_aligned, "",
 ABSL_FLAG(std::string, truth, "",
           "register: the true T_target_source as 16 row-major numbers (spaces or commas): also "
           "print the rotation and translation errors");
+ABSL_FLAG(std::string, initial, "",
+          "register: a starting guess of T_target_source as 16 row-major numbers (a GPS/INS "
+          "prior, the last pose of a tracker): the network estimates the rest from it, refine "
+          "starts there, scene-scale clouds choose refine; with --hold_degenerate_at_initial a "
+          "degenerate answer keeps it along the unconstrained directions");
 
 namespace rpsr::client {
 namespace {
@@ -40,16 +47,19 @@ int Fail(int code, const std::string& message) {
   return code;
 }
 
-absl::StatusOr<Eigen::Isometry3d> ParseTruth(const std::string& text) {
+// A rigid transform given on the command line as 16 row-major numbers (--truth, --initial).
+absl::StatusOr<Eigen::Isometry3d> ParseTransformFlag(const std::string& flag,
+                                                     const std::string& text) {
   std::vector<std::string> parts = absl::StrSplit(text, absl::ByAnyChar(" ,"), absl::SkipEmpty());
   if (parts.size() != 16) {
     return absl::InvalidArgumentError(
-        absl::StrCat("--truth needs 16 numbers (row-major 4x4), got ", parts.size()));
+        absl::StrCat("--", flag, " needs 16 numbers (row-major 4x4), got ", parts.size()));
   }
   std::array<double, 16> entries;
   for (int i = 0; i < 16; ++i) {
     if (!absl::SimpleAtod(parts[i], &entries[i])) {
-      return absl::InvalidArgumentError(absl::StrCat("--truth: '", parts[i], "' is not a number"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("--", flag, ": '", parts[i], "' is not a number"));
     }
   }
   return core::TransformFromRowMajor(entries);
@@ -58,7 +68,8 @@ absl::StatusOr<Eigen::Isometry3d> ParseTruth(const std::string& text) {
 #if RPSR_CLI_HAS_SERVICE
 absl::StatusOr<PairReport> RegisterOnServer(const core::PointCloud& source,
                                             const core::PointCloud& target,
-                                            const std::string& requested_mode, int tree_depth) {
+                                            const std::string& requested_mode, int tree_depth,
+                                            const std::optional<Eigen::Isometry3d>& initial) {
   absl::StatusOr<ClientOptions> options = ClientOptionsFromFlags();
   if (!options.ok()) return options.status();
   absl::StatusOr<std::unique_ptr<Client>> client = Client::Connect(*options);
@@ -71,12 +82,15 @@ absl::StatusOr<PairReport> RegisterOnServer(const core::PointCloud& source,
   absl::StatusOr<std::unique_ptr<Session>> session = (*client)->CreateSession(session_options);
   if (!session.ok()) return session.status();
   RegisterOptions register_options;
-  register_options.mode = ChooseMode(source, target, requested_mode, info->model_name, nullptr);
+  register_options.mode =
+      ChooseMode(source, target, requested_mode, info->model_name, nullptr, initial.has_value());
+  register_options.initial_T_target_source = initial;
   register_options.passes = absl::GetFlag(FLAGS_passes);
   register_options.refine_from_initial = absl::GetFlag(FLAGS_refine_from_initial);
   register_options.search_scene_start = absl::GetFlag(FLAGS_search_scene_start);
   register_options.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
   register_options.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);
+  register_options.hold_degenerate_at_initial = absl::GetFlag(FLAGS_hold_degenerate_at_initial);
   absl::StatusOr<RegistrationResult> result =
       (*session)->Register(source.points, target.points, register_options);
   if (!result.ok()) return result.status();
@@ -91,15 +105,23 @@ int RunRegisterCommand(const std::vector<std::string>& args) {
     return Fail(kBadFlags,
                 "usage: rpsr register SOURCE TARGET [--server ADDR | --local] [--mode "
                 "net|net+refine|refine] [--tree_depth D] [--output_aligned FILE] [--truth "
-                "'16 numbers'] [--json]");
+                "'16 numbers'] [--initial '16 numbers'] [--json]");
   }
   absl::StatusOr<bool> use_server = UseServerFlag();
   if (!use_server.ok()) return Fail(kBadFlags, std::string(use_server.status().message()));
   std::optional<Eigen::Isometry3d> truth;
   if (!absl::GetFlag(FLAGS_truth).empty()) {
-    absl::StatusOr<Eigen::Isometry3d> parsed = ParseTruth(absl::GetFlag(FLAGS_truth));
+    absl::StatusOr<Eigen::Isometry3d> parsed =
+        ParseTransformFlag("truth", absl::GetFlag(FLAGS_truth));
     if (!parsed.ok()) return Fail(kBadFlags, std::string(parsed.status().message()));
     truth = *parsed;
+  }
+  std::optional<Eigen::Isometry3d> initial;
+  if (!absl::GetFlag(FLAGS_initial).empty()) {
+    absl::StatusOr<Eigen::Isometry3d> parsed =
+        ParseTransformFlag("initial", absl::GetFlag(FLAGS_initial));
+    if (!parsed.ok()) return Fail(kBadFlags, std::string(parsed.status().message()));
+    initial = *parsed;
   }
   const std::string requested_mode = ExplicitModeFlag();
   if (!requested_mode.empty() && !core::ParseRegistrationMode(requested_mode).ok()) {
@@ -114,14 +136,15 @@ int RunRegisterCommand(const std::vector<std::string>& args) {
   absl::StatusOr<PairReport> report;
   if (*use_server) {
 #if RPSR_CLI_HAS_SERVICE
-    report = RegisterOnServer(*source, *target, requested_mode, tree_depth);
+    report = RegisterOnServer(*source, *target, requested_mode, tree_depth, initial);
 #else
     return Fail(kBadFlags, "this rpsr was built without the client library (core-only build)");
 #endif
   } else {
     const std::string model_flag = absl::GetFlag(FLAGS_model);
-    const std::string mode = ChooseMode(*source, *target, requested_mode,
-                                        model_flag.empty() ? "objects" : model_flag, nullptr);
+    const std::string mode =
+        ChooseMode(*source, *target, requested_mode, model_flag.empty() ? "objects" : model_flag,
+                   nullptr, initial.has_value());
     absl::StatusOr<std::unique_ptr<core::Registrar>> registrar =
         core::Registrar::Create(RegistrarConfigFromModelFlag(model_flag));
     if (!registrar.ok()) return Fail(kFailure, std::string(registrar.status().message()));
@@ -132,6 +155,8 @@ int RunRegisterCommand(const std::vector<std::string>& args) {
     options.search_scene_start = absl::GetFlag(FLAGS_search_scene_start);
     options.refinement.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
     options.refinement.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);
+    options.initial_T_target_source = initial;
+    options.hold_degenerate_at_initial = absl::GetFlag(FLAGS_hold_degenerate_at_initial);
     report = RegisterWithRegistrar(**registrar, *source, *target, tree_depth, options);
   }
   if (!report.ok()) return Fail(kFailure, std::string(report.status().message()));

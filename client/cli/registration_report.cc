@@ -39,6 +39,7 @@ PairReport ReportOf(const core::RegistrationResult& result, double seconds) {
   report.mode = std::string(core::RegistrationModeName(result.mode));
   report.start = result.start;
   report.starts = result.starts;
+  report.held_at_initial = result.held_at_initial;
   report.seconds = seconds;
   return report;
 }
@@ -56,6 +57,7 @@ PairReport ReportOf(const RegistrationResult& result) {
   report.mode = result.mode;
   report.start = result.start;
   report.starts = result.starts;
+  report.held_at_initial = result.held_at_initial;
   report.seconds = result.round_trip_seconds;
   return report;
 }
@@ -137,6 +139,7 @@ std::string FormatReportJson(const PairReport& report) {
       ", \"inlier_rmse\": ", absl::StrFormat("%.9g", report.inlier_rmse),
       ", \"iterations\": ", report.iterations, ", \"mode\": ", JsonString(report.mode),
       ", \"start\": ", JsonString(report.start), ", \"starts\": ", report.starts,
+      ", \"held_at_initial\": ", report.held_at_initial ? "true" : "false",
       ", \"seconds\": ", absl::StrFormat("%.6f", report.seconds));
   if (report.truth) {
     const core::PairError error = core::ErrorOf(report.T_target_source, *report.truth);

@@ -27,8 +27,10 @@ struct PairReport {
   double inlier_rmse = 0.0;
   int iterations = 0;
   std::string mode;
-  std::string start;     // where the answer's refinement started: network, initial, searched
-  int starts = 0;        // refinement starts tried for this pair
+  std::string start;  // where the answer's refinement started: network, initial, searched
+  int starts = 0;     // refinement starts tried for this pair
+  // Degenerate, and kept at the initial guess along the unconstrained directions.
+  bool held_at_initial = false;
   double seconds = 0.0;  // wall time of the registration as the caller saw it
   // Against a known truth, when there is one.
   std::optional<Eigen::Isometry3d> truth;

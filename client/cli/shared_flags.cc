@@ -58,9 +58,9 @@ ABSL_FLAG(bool, joint_finest_stage, true,
           "refinement's finest stage also fits the next coarser depth re-binned on the target's "
           "cells; false: the finest depth alone");
 ABSL_FLAG(bool, hold_degenerate_at_initial, true,
-          "odometry (with --constant_velocity): when a frame's geometry is degenerate (an open "
-          "road along its length), keep the previous motion along the unconstrained directions "
-          "(false: the refinement's drift there)");
+          "register (with --initial), odometry (with --constant_velocity): when the geometry is "
+          "degenerate (an open road along its length), keep the guess (the previous motion) "
+          "along the unconstrained directions (false: the refinement's drift there)");
 ABSL_FLAG(std::string, model, "",
           "eval, calibrate: a weights file (.rpsrw) or the name of a model embedded in the binary "
           "(objects, objects-small; lidar when shipped); default: the embedded object model");

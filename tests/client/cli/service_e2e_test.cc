@@ -14,6 +14,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <random>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -196,6 +197,52 @@ TEST_F(ServiceEndToEndTest, RegisterOnTheServerMatchesLocal) {
   EXPECT_THAT(err_, HasSubstr("/nonexistent.ply"));
 }
 
+// --initial: a starting guess reaches the registrar in both places. From the truth, refine stays
+// there; on a corridor (floor and two walls along x) from a guess 0.6 m along it, the degenerate
+// answer keeps the guess's 0.6 m (--hold_degenerate_at_initial, on by default) and says so.
+TEST_F(ServiceEndToEndTest, RegisterStartsFromTheInitialGuess) {
+  const std::string pair = absl::StrCat(Data("object/clouds/000000_source.ply"), " ",
+                                        Data("object/clouds/000000_target.ply"));
+  for (const std::string where : {std::string("--local"), absl::StrCat("--server ", Server())}) {
+    ASSERT_EQ(Rpsr(absl::StrCat("register ", pair, " ", where, " --mode refine --json --initial '",
+                                Truth("object"), "' --truth '", Truth("object"), "'")),
+              0)
+        << where << ": " << err_;
+    EXPECT_LT(JsonNumber(out_, "rotation_error_deg"), 0.5) << where << ": " << out_;
+    EXPECT_THAT(out_, HasSubstr("\"start\": \"initial\"")) << where;
+    EXPECT_THAT(out_, HasSubstr("\"held_at_initial\": false")) << where;
+  }
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> along(-10.0, 10.0), unit(0.0, 1.0);
+  for (const std::string name : {"corridor_source.xyz", "corridor_target.xyz"}) {
+    std::ofstream file(*dir_ / name);
+    for (int i = 0; i < 8000; ++i) {
+      const double x = along(rng);
+      if (i % 3 == 0) file << x << " " << -1.5 + 3.0 * unit(rng) << " 0\n";
+      if (i % 3 == 1) file << x << " -1.5 " << 2.5 * unit(rng) << "\n";
+      if (i % 3 == 2) file << x << " 1.5 " << 2.5 * unit(rng) << "\n";
+    }
+  }
+  const std::string corridor = absl::StrCat(
+      (*dir_ / "corridor_source.xyz").string(), " ", (*dir_ / "corridor_target.xyz").string(),
+      " --mode refine --json --initial '1 0 0 0.6  0 1 0 0.15  0 0 1 0  0 0 0 1'");
+  for (const std::string where : {std::string("--local"), absl::StrCat("--server ", Server())}) {
+    EXPECT_EQ(Rpsr(absl::StrCat("register ", corridor, " ", where)), 3) << where << ": " << err_;
+    EXPECT_THAT(out_, HasSubstr("\"held_at_initial\": true")) << where << ": " << out_;
+    const size_t translation = out_.find("\"translation\": [");
+    ASSERT_NE(translation, std::string::npos) << out_;
+    EXPECT_NEAR(std::strtod(out_.c_str() + translation + 16, nullptr), 0.6, 1e-3)
+        << where << ": " << out_;
+    EXPECT_EQ(Rpsr(absl::StrCat("register ", corridor, " ", where,
+                                " --hold_degenerate_at_initial=false")),
+              3)
+        << where << ": " << err_;
+    EXPECT_THAT(out_, HasSubstr("\"held_at_initial\": false")) << where << ": " << out_;
+  }
+  EXPECT_EQ(Rpsr(absl::StrCat("register ", pair, " --local --initial '1 0 0'")), 2);
+  EXPECT_THAT(err_, HasSubstr("--initial needs 16 numbers"));
+}
+
 TEST_F(ServiceEndToEndTest, OdometryOnASimulatedSequenceMeetsKittiThresholds) {
   const fs::path kitti = *dir_ / "kitti";
   ASSERT_EQ(Rpsr(absl::StrCat("data lidar --output ", kitti.string(),
@@ -210,7 +257,7 @@ TEST_F(ServiceEndToEndTest, OdometryOnASimulatedSequenceMeetsKittiThresholds) {
   EXPECT_EQ(JsonNumber(out_, "frames"), 150);
   EXPECT_EQ(JsonNumber(out_, "invalid_pairs"), 0) << out_;
   EXPECT_EQ(JsonNumber(out_, "held_pairs"), 0) << out_;  // no degenerate frame on this street
-  ASSERT_GE(JsonNumber(out_, "segments"), 1) << out_;  // at least one 100 m segment
+  ASSERT_GE(JsonNumber(out_, "segments"), 1) << out_;    // at least one 100 m segment
   // Thresholds with room: measured 0.56 % and 0.008 deg/m on this sequence.
   EXPECT_LT(JsonNumber(out_, "translation_error_percent"), 2.0) << out_;
   EXPECT_LT(JsonNumber(out_, "rotation_error_deg_per_m"), 0.03) << out_;
