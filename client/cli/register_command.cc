@@ -47,9 +47,11 @@ int Fail(int code, const std::string& message) {
   return code;
 }
 
-// A rigid transform given on the command line as 16 row-major numbers (--truth, --initial).
-absl::StatusOr<Eigen::Isometry3d> ParseTransformFlag(const std::string& flag,
-                                                     const std::string& text) {
+// A rigid transform given on the command line as 16 row-major numbers (--truth, --initial);
+// none when the flag is empty.
+absl::StatusOr<std::optional<Eigen::Isometry3d>> ParseTransformFlag(const std::string& flag,
+                                                                    const std::string& text) {
+  if (text.empty()) return std::nullopt;
   std::vector<std::string> parts = absl::StrSplit(text, absl::ByAnyChar(" ,"), absl::SkipEmpty());
   if (parts.size() != 16) {
     return absl::InvalidArgumentError(
@@ -109,20 +111,12 @@ int RunRegisterCommand(const std::vector<std::string>& args) {
   }
   absl::StatusOr<bool> use_server = UseServerFlag();
   if (!use_server.ok()) return Fail(kBadFlags, std::string(use_server.status().message()));
-  std::optional<Eigen::Isometry3d> truth;
-  if (!absl::GetFlag(FLAGS_truth).empty()) {
-    absl::StatusOr<Eigen::Isometry3d> parsed =
-        ParseTransformFlag("truth", absl::GetFlag(FLAGS_truth));
-    if (!parsed.ok()) return Fail(kBadFlags, std::string(parsed.status().message()));
-    truth = *parsed;
-  }
-  std::optional<Eigen::Isometry3d> initial;
-  if (!absl::GetFlag(FLAGS_initial).empty()) {
-    absl::StatusOr<Eigen::Isometry3d> parsed =
-        ParseTransformFlag("initial", absl::GetFlag(FLAGS_initial));
-    if (!parsed.ok()) return Fail(kBadFlags, std::string(parsed.status().message()));
-    initial = *parsed;
-  }
+  absl::StatusOr<std::optional<Eigen::Isometry3d>> truth =
+      ParseTransformFlag("truth", absl::GetFlag(FLAGS_truth));
+  if (!truth.ok()) return Fail(kBadFlags, std::string(truth.status().message()));
+  absl::StatusOr<std::optional<Eigen::Isometry3d>> initial =
+      ParseTransformFlag("initial", absl::GetFlag(FLAGS_initial));
+  if (!initial.ok()) return Fail(kBadFlags, std::string(initial.status().message()));
   const std::string requested_mode = ExplicitModeFlag();
   if (!requested_mode.empty() && !core::ParseRegistrationMode(requested_mode).ok()) {
     return Fail(kBadFlags, "--mode must be net, net+refine or refine");
@@ -136,7 +130,7 @@ int RunRegisterCommand(const std::vector<std::string>& args) {
   absl::StatusOr<PairReport> report;
   if (*use_server) {
 #if RPSR_CLI_HAS_SERVICE
-    report = RegisterOnServer(*source, *target, requested_mode, tree_depth, initial);
+    report = RegisterOnServer(*source, *target, requested_mode, tree_depth, *initial);
 #else
     return Fail(kBadFlags, "this rpsr was built without the client library (core-only build)");
 #endif
@@ -144,7 +138,7 @@ int RunRegisterCommand(const std::vector<std::string>& args) {
     const std::string model_flag = absl::GetFlag(FLAGS_model);
     const std::string mode =
         ChooseMode(*source, *target, requested_mode, model_flag.empty() ? "objects" : model_flag,
-                   nullptr, initial.has_value());
+                   nullptr, initial->has_value());
     absl::StatusOr<std::unique_ptr<core::Registrar>> registrar =
         core::Registrar::Create(RegistrarConfigFromModelFlag(model_flag));
     if (!registrar.ok()) return Fail(kFailure, std::string(registrar.status().message()));
@@ -155,12 +149,12 @@ int RunRegisterCommand(const std::vector<std::string>& args) {
     options.search_scene_start = absl::GetFlag(FLAGS_search_scene_start);
     options.refinement.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
     options.refinement.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);
-    options.initial_T_target_source = initial;
+    options.initial_T_target_source = *initial;
     options.hold_degenerate_at_initial = absl::GetFlag(FLAGS_hold_degenerate_at_initial);
     report = RegisterWithRegistrar(**registrar, *source, *target, tree_depth, options);
   }
   if (!report.ok()) return Fail(kFailure, std::string(report.status().message()));
-  report->truth = truth;
+  report->truth = *truth;
 
   if (!absl::GetFlag(FLAGS_output_aligned).empty()) {
     const core::PointCloud aligned =
