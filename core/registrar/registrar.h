@@ -83,12 +83,11 @@ struct RegistrationOptions {
   // them the pose is the guess's (HoldDegenerateDirections, core/refine/degenerate_hold.h), and
   // the result says so (held_at_initial). Along an unconstrained direction the refinement's
   // answer is drift, the caller's guess (a tracker's constant-velocity motion) is the better
-  // value. `rpsr odometry --local` on simulated open roads (`rpsr data lidar --style open`), KITTI
-  // translation error without -> with: 7.59% -> 2.18% (200 frames, seed 5, half of them
-  // degenerate), 4.42% -> 3.98% and 5.29% -> 4.85% (300 frames, seeds 11 and 12, 33 and 40
-  // degenerate); suburban, urban and parking sequences have no degenerate frame and are
-  // unchanged. The answer stays invalid (degenerate): that component is the guess, not a
-  // measurement.
+  // value. `rpsr odometry --local` on simulated open roads (`rpsr data lidar --frames 300 --style
+  // open --seed 5/7/11/12`), KITTI translation error without -> with: 7.26/5.64/4.07/4.24% ->
+  // 3.99/4.64/3.74/3.95% (60/10/33/40 of 299 frames degenerate); the suburban, urban and parking
+  // sequences have no degenerate frame and are unchanged. The answer stays invalid (degenerate):
+  // that component is the guess, not a measurement.
   bool hold_degenerate_at_initial = true;
   TreeRefinementOptions refinement;
 };
