@@ -64,7 +64,11 @@ absl::StatusOr<std::optional<Eigen::Isometry3d>> ParseTransformFlag(const std::s
           absl::StrCat("--", flag, ": '", parts[i], "' is not a number"));
     }
   }
-  return core::TransformFromRowMajor(entries);
+  absl::StatusOr<Eigen::Isometry3d> transform = core::TransformFromRowMajor(entries);
+  if (!transform.ok()) {
+    return absl::InvalidArgumentError(absl::StrCat("--", flag, ": ", transform.status().message()));
+  }
+  return *transform;
 }
 
 #if RPSR_CLI_HAS_SERVICE

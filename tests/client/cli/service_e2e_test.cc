@@ -241,6 +241,10 @@ TEST_F(ServiceEndToEndTest, RegisterStartsFromTheInitialGuess) {
   }
   EXPECT_EQ(Rpsr(absl::StrCat("register ", pair, " --local --initial '1 0 0'")), 2);
   EXPECT_THAT(err_, HasSubstr("--initial needs 16 numbers"));
+  EXPECT_EQ(Rpsr(absl::StrCat("register ", pair,
+                              " --local --initial '2 0 0 0  0 1 0 0  0 0 1 0  0 0 0 1'")),
+            2);
+  EXPECT_THAT(err_, HasSubstr("--initial: transform's 3x3 block is not a rotation"));
 }
 
 TEST_F(ServiceEndToEndTest, OdometryOnASimulatedSequenceMeetsKittiThresholds) {
