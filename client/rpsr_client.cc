@@ -124,6 +124,7 @@ void ToProto(const RegisterOptions& in, rpsr::v1::RegisterOptions* out) {
   out->set_search_scene_start(in.search_scene_start);
   out->set_rebin_coarse_depths(in.rebin_coarse_depths);
   out->set_joint_finest_stage(in.joint_finest_stage);
+  out->set_coarse_wide_search(in.coarse_wide_search);
   out->set_hold_degenerate_at_initial(in.hold_degenerate_at_initial);
 }
 

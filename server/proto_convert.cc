@@ -103,6 +103,9 @@ absl::StatusOr<core::RegistrationOptions> OptionsFromProto(const v1::RegisterOpt
   if (proto.has_joint_finest_stage()) {
     options.refinement.joint_finest_stage = proto.joint_finest_stage();
   }
+  if (proto.has_coarse_wide_search() && !proto.coarse_wide_search()) {
+    core::SearchCoarseStagesAsTheFinest(options.refinement);
+  }
   if (proto.has_hold_degenerate_at_initial()) {
     options.hold_degenerate_at_initial = proto.hold_degenerate_at_initial();
   }

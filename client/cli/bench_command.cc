@@ -119,7 +119,7 @@ int RunBenchCommand(const std::vector<std::string>& args) {
 
   RegisterOptions register_options;
   register_options.mode = mode;
-  register_options.passes = absl::GetFlag(FLAGS_passes);
+  ApplyRegistrationFlags(register_options);
   std::vector<ClientTally> tallies(static_cast<size_t>(clients));
   std::atomic<int64_t> answered{0};
   const auto start = std::chrono::steady_clock::now();

@@ -232,11 +232,7 @@ int RunEvalCommand(const std::vector<std::string>& /*args*/) {
   const int batch_size = std::max(1, absl::GetFlag(FLAGS_batch_size));
   core::RegistrationOptions registration;
   registration.mode = *parsed_mode;
-  registration.passes = absl::GetFlag(FLAGS_passes);
-  registration.also_refine_from_initial = absl::GetFlag(FLAGS_refine_from_initial);
-  registration.search_scene_start = absl::GetFlag(FLAGS_search_scene_start);
-  registration.refinement.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
-  registration.refinement.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);
+  ApplyRegistrationFlags(registration);
   std::string summary_csv =
       "setting,pairs,rotation_rmse_deg,rotation_mae_deg,"
       "rotation_median_deg,translation_rmse,translation_mae,"

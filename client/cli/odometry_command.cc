@@ -211,12 +211,7 @@ absl::StatusOr<std::vector<Step>> RunLocally(const std::vector<std::string>& fra
   if (!parsed_mode.ok()) return parsed_mode.status();
   core::RegistrationOptions options;
   options.mode = *parsed_mode;
-  options.passes = absl::GetFlag(FLAGS_passes);
-  options.also_refine_from_initial = absl::GetFlag(FLAGS_refine_from_initial);
-  options.search_scene_start = absl::GetFlag(FLAGS_search_scene_start);
-  options.refinement.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
-  options.refinement.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);
-  options.hold_degenerate_at_initial = absl::GetFlag(FLAGS_hold_degenerate_at_initial);
+  ApplyRegistrationFlags(options);
   const bool constant_velocity = absl::GetFlag(FLAGS_constant_velocity);
   FrameProgress progress(static_cast<int>(frames.size()));
   for (size_t i = 1; i < frames.size(); ++i) {
@@ -274,13 +269,7 @@ absl::StatusOr<std::vector<Step>> RunOnServer(const std::vector<std::string>& fr
   TrackerOptions tracker_options;
   tracker_options.registration.mode = ChooseMode(*first, *first, requested_mode, info->model_name,
                                                  nullptr, absl::GetFlag(FLAGS_constant_velocity));
-  tracker_options.registration.passes = absl::GetFlag(FLAGS_passes);
-  tracker_options.registration.refine_from_initial = absl::GetFlag(FLAGS_refine_from_initial);
-  tracker_options.registration.search_scene_start = absl::GetFlag(FLAGS_search_scene_start);
-  tracker_options.registration.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
-  tracker_options.registration.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);
-  tracker_options.registration.hold_degenerate_at_initial =
-      absl::GetFlag(FLAGS_hold_degenerate_at_initial);
+  ApplyRegistrationFlags(tracker_options.registration);
   tracker_options.constant_velocity_prior = absl::GetFlag(FLAGS_constant_velocity);
   absl::StatusOr<std::unique_ptr<Tracker>> tracker = (*session)->StartTracker(tracker_options);
   if (!tracker.ok()) return tracker.status();

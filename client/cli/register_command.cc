@@ -91,12 +91,7 @@ absl::StatusOr<PairReport> RegisterOnServer(const core::PointCloud& source,
   register_options.mode =
       ChooseMode(source, target, requested_mode, info->model_name, nullptr, initial.has_value());
   register_options.initial_T_target_source = initial;
-  register_options.passes = absl::GetFlag(FLAGS_passes);
-  register_options.refine_from_initial = absl::GetFlag(FLAGS_refine_from_initial);
-  register_options.search_scene_start = absl::GetFlag(FLAGS_search_scene_start);
-  register_options.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
-  register_options.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);
-  register_options.hold_degenerate_at_initial = absl::GetFlag(FLAGS_hold_degenerate_at_initial);
+  ApplyRegistrationFlags(register_options);
   absl::StatusOr<RegistrationResult> result =
       (*session)->Register(source.points, target.points, register_options);
   if (!result.ok()) return result.status();
@@ -148,13 +143,8 @@ int RunRegisterCommand(const std::vector<std::string>& args) {
     if (!registrar.ok()) return Fail(kFailure, std::string(registrar.status().message()));
     core::RegistrationOptions options;
     options.mode = *core::ParseRegistrationMode(mode);
-    options.passes = absl::GetFlag(FLAGS_passes);
-    options.also_refine_from_initial = absl::GetFlag(FLAGS_refine_from_initial);
-    options.search_scene_start = absl::GetFlag(FLAGS_search_scene_start);
-    options.refinement.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
-    options.refinement.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);
+    ApplyRegistrationFlags(options);
     options.initial_T_target_source = *initial;
-    options.hold_degenerate_at_initial = absl::GetFlag(FLAGS_hold_degenerate_at_initial);
     report = RegisterWithRegistrar(**registrar, *source, *target, tree_depth, options);
   }
   if (!report.ok()) return Fail(kFailure, std::string(report.status().message()));

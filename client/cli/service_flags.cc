@@ -45,6 +45,16 @@ absl::StatusOr<bool> UseServerFlag() {
 }
 
 #if RPSR_CLI_HAS_SERVICE
+void ApplyRegistrationFlags(RegisterOptions& options) {
+  options.passes = absl::GetFlag(FLAGS_passes);
+  options.refine_from_initial = absl::GetFlag(FLAGS_refine_from_initial);
+  options.search_scene_start = absl::GetFlag(FLAGS_search_scene_start);
+  options.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
+  options.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);
+  options.coarse_wide_search = absl::GetFlag(FLAGS_coarse_wide_search);
+  options.hold_degenerate_at_initial = absl::GetFlag(FLAGS_hold_degenerate_at_initial);
+}
+
 absl::StatusOr<ClientOptions> ClientOptionsFromFlags() {
   ClientOptions options;
   options.address = absl::GetFlag(FLAGS_server);

@@ -35,6 +35,9 @@ absl::StatusOr<bool> UseServerFlag();
 namespace rpsr::client {
 // ClientOptions from --server, --token, --tls_ca (PEM file read here) and --timeout_s.
 absl::StatusOr<ClientOptions> ClientOptionsFromFlags();
+// The shared registration flags (ApplyRegistrationFlags) on a request to the service; its mode
+// and initial guess stay the caller's.
+void ApplyRegistrationFlags(RegisterOptions& options);
 #endif
 
 }  // namespace rpsr::client

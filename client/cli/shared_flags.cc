@@ -57,6 +57,10 @@ ABSL_FLAG(bool, joint_finest_stage, true,
           "eval, register, odometry (refining modes, with --rebin_coarse_depths): the "
           "refinement's finest stage also fits the next coarser depth re-binned on the target's "
           "cells; false: the finest depth alone");
+ABSL_FLAG(bool, coarse_wide_search, true,
+          "eval, register, odometry (refining modes, with --rebin_coarse_depths): the coarse "
+          "stages look for each cell's partner within two cells (3x3x3 block); false: one cell, "
+          "as the finest stage (faster, less accurate under jitter, crops and outliers)");
 ABSL_FLAG(bool, hold_degenerate_at_initial, true,
           "register (with --initial), odometry (with --constant_velocity): when the geometry is "
           "degenerate (an open road along its length), keep the guess (the previous motion) "
@@ -74,6 +78,18 @@ ABSL_FLAG(int, tree_depth, 6,
           "objects and 9 for LiDAR scenes when not given");
 
 namespace rpsr::client {
+
+void ApplyRegistrationFlags(core::RegistrationOptions& options) {
+  options.passes = absl::GetFlag(FLAGS_passes);
+  options.also_refine_from_initial = absl::GetFlag(FLAGS_refine_from_initial);
+  options.search_scene_start = absl::GetFlag(FLAGS_search_scene_start);
+  options.refinement.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
+  options.refinement.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);
+  if (!absl::GetFlag(FLAGS_coarse_wide_search)) {
+    core::SearchCoarseStagesAsTheFinest(options.refinement);
+  }
+  options.hold_degenerate_at_initial = absl::GetFlag(FLAGS_hold_degenerate_at_initial);
+}
 
 std::optional<core::DisturbanceKind> ParseDisturbanceFlag(const std::string& name) {
   if (name == "none") return core::DisturbanceKind::kNone;

@@ -29,6 +29,7 @@ ABSL_DECLARE_FLAG(bool, search_scene_start);
 ABSL_DECLARE_FLAG(bool, rebin_coarse_depths);
 ABSL_DECLARE_FLAG(bool, joint_finest_stage);
 ABSL_DECLARE_FLAG(bool, hold_degenerate_at_initial);
+ABSL_DECLARE_FLAG(bool, coarse_wide_search);
 ABSL_DECLARE_FLAG(int, threads);
 ABSL_DECLARE_FLAG(std::string, model);
 ABSL_DECLARE_FLAG(std::string, mode);
@@ -43,6 +44,11 @@ std::optional<core::DisturbanceKind> ParseDisturbanceFlag(const std::string& nam
 // `empty_means`; nullopt for anything else.
 std::optional<core::ObjectSplit> ParseObjectSplitFlag(const std::string& name,
                                                       core::ObjectSplit empty_means);
+
+// The registration flags the subcommands share (--passes, --refine_from_initial,
+// --search_scene_start, --rebin_coarse_depths, --joint_finest_stage, --coarse_wide_search,
+// --hold_degenerate_at_initial) set on `options`; its mode and initial guess stay the caller's.
+void ApplyRegistrationFlags(core::RegistrationOptions& options);
 
 // --model: a weights file, or the name of an embedded model when no file of that name exists;
 // empty: the default embedded model (the Registrar then loads its shipped calibration too).

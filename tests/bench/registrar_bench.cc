@@ -139,8 +139,7 @@ TreeRefinementOptions FinestAlone() {
 // instead of two cells in the 3x3x3 block (TreeRefinementOptions::coarse_*).
 TreeRefinementOptions CoarseOneCell() {
   TreeRefinementOptions options;
-  options.coarse_search_27_neighbors = options.search_27_neighbors;
-  options.coarse_max_correspondence_distance_cells = options.max_correspondence_distance_cells;
+  SearchCoarseStagesAsTheFinest(options);
   return options;
 }
 

@@ -179,6 +179,13 @@ TEST_F(RpsrClientTest, UploadsInChunksAndRegistersByIds) {
       (*session)->Register(source->cloud_id, target->cloud_id, own_cells);
   ASSERT_TRUE(on_own_cells.ok()) << on_own_cells.status();
   EXPECT_NE(on_own_cells->T_target_source.matrix(), refined->T_target_source.matrix());
+  // And the coarse stages' search: one cell, as the finest stage searches.
+  RegisterOptions one_cell = refine;
+  one_cell.coarse_wide_search = false;
+  absl::StatusOr<RegistrationResult> searched_one_cell =
+      (*session)->Register(source->cloud_id, target->cloud_id, one_cell);
+  ASSERT_TRUE(searched_one_cell.ok()) << searched_one_cell.status();
+  EXPECT_NE(searched_one_cell->T_target_source.matrix(), refined->T_target_source.matrix());
   EXPECT_TRUE((*session)->Release(source->cloud_id).ok());
   // Released: the library refuses the id before asking the server.
   EXPECT_EQ((*session)->Register(source->cloud_id, target->cloud_id).status().code(),

@@ -90,6 +90,24 @@ TEST(ProtoConvertTest, JointFinestStageIsOnUnlessTurnedOff) {
   EXPECT_FALSE(options->refinement.joint_finest_stage);
 }
 
+TEST(ProtoConvertTest, CoarseWideSearchIsOnUnlessTurnedOff) {
+  const core::TreeRefinementOptions defaults;
+  auto options = OptionsFromProto({});
+  ASSERT_TRUE(options.ok());
+  EXPECT_EQ(options->refinement.coarse_search_27_neighbors, defaults.coarse_search_27_neighbors);
+  EXPECT_EQ(options->refinement.coarse_max_correspondence_distance_cells,
+            defaults.coarse_max_correspondence_distance_cells);
+  v1::RegisterOptions proto;
+  proto.set_coarse_wide_search(false);
+  options = OptionsFromProto(proto);
+  ASSERT_TRUE(options.ok());
+  EXPECT_EQ(options->refinement.coarse_search_27_neighbors, defaults.search_27_neighbors);
+  EXPECT_EQ(options->refinement.coarse_max_correspondence_distance_cells,
+            defaults.max_correspondence_distance_cells);
+  EXPECT_NE(defaults.coarse_max_correspondence_distance_cells,
+            defaults.max_correspondence_distance_cells);
+}
+
 TEST(ProtoConvertTest, HoldingDegenerateDirectionsAtTheGuessIsOnUnlessTurnedOff) {
   auto options = OptionsFromProto({});
   ASSERT_TRUE(options.ok());

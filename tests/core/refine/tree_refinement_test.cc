@@ -199,8 +199,10 @@ TEST(TreeRefinementTest, CoarseStagesSearchingTwoCellsHoldHeavyJitterCloser) {
   EXPECT_TRUE(defaults.coarse_search_27_neighbors);
   EXPECT_EQ(defaults.coarse_max_correspondence_distance_cells, 2.0);
   TreeRefinementOptions one_cell;  // the finest stage's search at every depth
-  one_cell.coarse_search_27_neighbors = defaults.search_27_neighbors;
-  one_cell.coarse_max_correspondence_distance_cells = defaults.max_correspondence_distance_cells;
+  SearchCoarseStagesAsTheFinest(one_cell);
+  EXPECT_EQ(one_cell.coarse_search_27_neighbors, defaults.search_27_neighbors);
+  EXPECT_EQ(one_cell.coarse_max_correspondence_distance_cells,
+            defaults.max_correspondence_distance_cells);
   const int narrow = failures(one_cell);
   const int wide = failures(defaults);
   // 54 + 56 and 48 + 47 of 2 x 60 here. (Not every setting gains from these starts: 40% uniform
