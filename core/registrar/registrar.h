@@ -85,7 +85,7 @@ struct RegistrationOptions {
   // answer is drift, the caller's guess (a tracker's constant-velocity motion) is the better
   // value. `rpsr odometry --local` on simulated open roads (`rpsr data lidar --frames 300 --style
   // open --seed 5/7/11/12`), KITTI translation error without -> with: 7.26/5.64/4.07/4.24% ->
-  // 3.99/4.64/3.74/3.95% (60/10/33/40 of 299 frames degenerate); the suburban, urban and parking
+  // 3.97/4.61/3.71/3.96% (60/10/33/40 of 299 frames degenerate); the suburban, urban and parking
   // sequences have no degenerate frame and are unchanged. The answer stays invalid (degenerate):
   // that component is the guess, not a measurement.
   bool hold_degenerate_at_initial = true;

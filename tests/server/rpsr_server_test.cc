@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <fstream>
 #include <future>
+#include <random>
 #include <thread>
 
 #include "absl/strings/str_cat.h"
@@ -491,6 +492,72 @@ TEST_F(ServerTest, RefusesBadRegistrationOptions) {
   session_options.set_model("lidar");
   EXPECT_CODE(client_->CreateSession(&ignored, session_options), FAILED_PRECONDITION,
               "runs model \"objects\"");
+}
+
+// With the constant-velocity prior, a frame starts from the last motion worth trusting: an
+// invalid answer (here a frame of flat ground only, degenerate) is not the next start. In
+// mode refine the answer's net_transform_target_source is the start it was given.
+TEST_F(ServerTest, TrackStartsFromTheLastValidMotion) {
+  core::LidarSequenceOptions options;
+  options.frame_count = 3;
+  options.seed = 5;
+  options.sensor.beam_count = 32;
+  options.sensor.azimuth_steps = 900;
+  auto simulator = core::LidarSequenceSimulator::Create(options);
+  ASSERT_TRUE(simulator.ok()) << simulator.status();
+  std::vector<std::vector<Eigen::Vector3f>> frames;
+  for (int frame = 0; frame < 2; ++frame) {
+    frames.push_back(simulator->SimulateFrame(frame).cloud.points);
+  }
+  // A frame that sees only flat ground: degenerate (along the ground and about the vertical),
+  // so invalid, and (hold_degenerate_at_initial off) left where the refinement drifted.
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> ground(-30.0f, 30.0f);
+  std::vector<Eigen::Vector3f> flat(20000);
+  for (Eigen::Vector3f& p : flat) p = Eigen::Vector3f(ground(rng), ground(rng), -1.73f);
+  frames.push_back(flat);
+  frames.push_back(simulator->SimulateFrame(2).cloud.points);
+
+  std::string lidar_session;
+  v1::SessionOptions session_options;
+  session_options.set_tree_max_depth(8);
+  ASSERT_TRUE(client_->CreateSession(&lidar_session, session_options).ok());
+  grpc::ClientContext context;
+  client_->Prepare(&context);
+  auto stream = client_->stub().Track(&context);
+  v1::TrackRequest start;
+  start.mutable_start()->set_session_id(lidar_session);
+  start.mutable_start()->mutable_options()->set_mode("refine");
+  start.mutable_start()->mutable_options()->set_hold_degenerate_at_initial(false);
+  start.mutable_start()->set_constant_velocity_prior(true);
+  ASSERT_TRUE(stream->Write(start));
+  std::vector<v1::TrackResponse> responses;
+  for (size_t frame = 0; frame < frames.size(); ++frame) {
+    for (const v1::UploadCloudRequest& message : UploadMessagesFor("", frames[frame], 8192)) {
+      v1::TrackRequest request;
+      v1::FrameChunk* chunk = request.mutable_chunk();
+      chunk->set_frame_index(frame);
+      chunk->set_sequence(message.sequence());
+      chunk->set_point_count(message.point_count());
+      chunk->set_xyz(message.xyz());
+      ASSERT_TRUE(stream->Write(request));
+    }
+    ASSERT_TRUE(stream->Read(&responses.emplace_back())) << "no answer for frame " << frame;
+  }
+  stream->WritesDone();
+  EXPECT_TRUE(stream->Finish().ok());
+  const v1::RegistrationResult& valid = responses[1].relative();
+  const v1::RegistrationResult& flat_answer = responses[2].relative();
+  ASSERT_TRUE(valid.valid()) << valid.failure_reason();
+  ASSERT_FALSE(flat_answer.valid());
+  const Eigen::Isometry3d flat_motion = TransformOf(flat_answer.transform_target_source());
+  const Eigen::Isometry3d valid_motion = TransformOf(valid.transform_target_source());
+  ASSERT_GT(core::ErrorOf(flat_motion, valid_motion).translation, 0.01)
+      << "the invalid answer must differ from the valid motion for this test to tell them apart";
+  // Frame 2 started from frame 1's motion; frame 3 too, not from frame 2's invalid answer.
+  EXPECT_TRUE(TransformOf(flat_answer.net_transform_target_source()).isApprox(valid_motion, 1e-9));
+  EXPECT_TRUE(TransformOf(responses[3].relative().net_transform_target_source())
+                  .isApprox(valid_motion, 1e-9));
 }
 
 TEST_F(ServerTest, TrackRefusesAStreamWithoutStart) {
