@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "absl/flags/flag.h"
+#include "absl/flags/internal/parse.h"
 #include "absl/strings/ascii.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
@@ -65,7 +66,11 @@ ABSL_FLAG(std::string, style, "urban",
           "cycled through the sequences");
 ABSL_FLAG(int, azimuth_steps, 2000,
           "lidar: azimuths per revolution (HDL-64E at 10 Hz: 2000; fewer thin the scans, e.g. "
-          "500 for small sample data)");
+          "500 for small sample data); given, it overrides --sensor's");
+ABSL_FLAG(std::string, sensor, "hdl64",
+          "lidar: the scanner simulated: hdl64 (64 beams, +2 to -24.8 deg, 2000 azimuths: "
+          "KITTI's), hdl32 (32 beams, +10.67 to -30.67 deg, 2250) or vlp16 (16 beams, +-15 deg, "
+          "1800), all at 10 Hz");
 ABSL_FLAG(std::string, kitti, "",
           "pairs --protocol lidar: root of a KITTI odometry layout (holding sequences/NN/), "
           "real or written by `rpsr data lidar`");
@@ -428,6 +433,30 @@ class FrameFileWatcher {
   std::thread thread_;  // last: starts after the members it uses
 };
 
+// --sensor's beams, elevations and azimuths (datasheet figures at 10 Hz), --azimuth_steps when
+// given on the command line.
+std::optional<core::LidarSensorOptions> SensorFromFlags() {
+  core::LidarSensorOptions sensor;
+  const std::string name = absl::AsciiStrToLower(absl::GetFlag(FLAGS_sensor));
+  if (name == "hdl32") {
+    sensor.beam_count = 32;
+    sensor.max_elevation_deg = 10.67;
+    sensor.min_elevation_deg = -30.67;
+    sensor.azimuth_steps = 2250;
+  } else if (name == "vlp16") {
+    sensor.beam_count = 16;
+    sensor.max_elevation_deg = 15.0;
+    sensor.min_elevation_deg = -15.0;
+    sensor.azimuth_steps = 1800;
+  } else if (name != "hdl64") {
+    return std::nullopt;
+  }
+  if (absl::flags_internal::WasPresentOnCommandLine("azimuth_steps")) {
+    sensor.azimuth_steps = absl::GetFlag(FLAGS_azimuth_steps);
+  }
+  return sensor;
+}
+
 int RunLidar() {
   const int sequences = absl::GetFlag(FLAGS_sequences);
   const int frames = absl::GetFlag(FLAGS_frames);
@@ -443,6 +472,11 @@ int RunLidar() {
     }
     styles.push_back(*style);
   }
+  const std::optional<core::LidarSensorOptions> sensor = SensorFromFlags();
+  if (!sensor) {
+    return Fail(kBadFlags, absl::StrCat("unknown --sensor '", absl::GetFlag(FLAGS_sensor),
+                                        "': use hdl64, hdl32 or vlp16"));
+  }
   int exit_code = 0;
   std::optional<std::string> output = MakeOutputFolder("sequences", &exit_code);
   if (!output) return exit_code;
@@ -455,7 +489,7 @@ int RunLidar() {
     options.style = styles[s % styles.size()];
     options.frame_count = frames;
     options.seed = core::DeriveSeed(seed, static_cast<uint64_t>(s));
-    options.sensor.azimuth_steps = absl::GetFlag(FLAGS_azimuth_steps);
+    options.sensor = *sensor;
     options.thread_count = std::clamp(static_cast<int>(std::thread::hardware_concurrency()), 1, 16);
     absl::StatusOr<core::SimulatedKittiSummary> summary;
     {

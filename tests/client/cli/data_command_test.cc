@@ -2,6 +2,8 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -194,6 +196,46 @@ TEST_F(DataCommandTest, SimulatedLidarSequenceGivesPairsWithItsGroundTruth) {
                                  " --sequence 07 --output ", Path("x"))),
             1);
   EXPECT_THAT(stderr_, HasSubstr("sequences under"));
+}
+
+// --sensor simulates the named scanner: a VLP-16's 16 beams span +-15 degrees, where an HDL-64E's
+// reach down to -24.8 degrees, and it returns a fraction of the points.
+TEST_F(DataCommandTest, SensorPresetsSimulateTheirBeams) {
+  struct Scan {
+    size_t points = 0;
+    double lowest_deg = 90.0;
+    double highest_deg = -90.0;
+  };
+  auto simulate = [&](const std::string& sensor) {
+    Scan scan;
+    const std::string out = Path(sensor);
+    EXPECT_EQ(RunData(absl::StrCat("lidar --frames 1 --seed 5 --style urban --sensor ", sensor,
+                                   " --output ", out)),
+              0)
+        << stderr_;
+    absl::StatusOr<core::KittiOdometrySequence> sequence =
+        core::KittiOdometrySequence::Open(out, 0);
+    EXPECT_TRUE(sequence.ok()) << sequence.status();
+    if (!sequence.ok()) return scan;
+    absl::StatusOr<core::PointCloud> cloud = sequence->ReadScan(0);
+    EXPECT_TRUE(cloud.ok()) << cloud.status();
+    if (!cloud.ok()) return scan;
+    scan.points = cloud->size();
+    for (const Eigen::Vector3f& p : cloud->points) {
+      const double elevation = std::atan2(p.z(), std::hypot(p.x(), p.y())) * 180.0 / M_PI;
+      scan.lowest_deg = std::min(scan.lowest_deg, elevation);
+      scan.highest_deg = std::max(scan.highest_deg, elevation);
+    }
+    return scan;
+  };
+  const Scan hdl64 = simulate("hdl64");
+  const Scan vlp16 = simulate("vlp16");
+  EXPECT_LT(hdl64.lowest_deg, -24.0);
+  EXPECT_GT(vlp16.lowest_deg, -15.5);  // range noise moves a return a little off its beam
+  EXPECT_LT(vlp16.lowest_deg, -14.5);
+  EXPECT_LT(vlp16.points * 3, hdl64.points);
+  EXPECT_EQ(RunData("lidar --sensor vlp32 --output " + Path("x")), 2);
+  EXPECT_THAT(stderr_, HasSubstr("hdl64, hdl32 or vlp16"));
 }
 
 TEST_F(DataCommandTest, BadFlagsExitWithTwoAndSayWhatToFix) {
