@@ -125,6 +125,7 @@ void ToProto(const RegisterOptions& in, rpsr::v1::RegisterOptions* out) {
   out->set_rebin_coarse_depths(in.rebin_coarse_depths);
   out->set_joint_finest_stage(in.joint_finest_stage);
   out->set_coarse_wide_search(in.coarse_wide_search);
+  out->set_line_normals_from_planes(in.line_normals_from_planes);
   out->set_hold_degenerate_at_initial(in.hold_degenerate_at_initial);
 }
 

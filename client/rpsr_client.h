@@ -154,6 +154,9 @@ struct RegisterOptions {
   // With it, the coarse stages search two cells (proto RegisterOptions.coarse_wide_search; false:
   // one, as the finest stage, ~1.1 ms less an object's refinement).
   bool coarse_wide_search = true;
+  // Line-shaped nodes (a sparse scan's ring arcs) take their ancestor plane's normal (proto
+  // RegisterOptions.line_normals_from_planes): for 16- and 32-beam scanners.
+  bool line_normals_from_planes = false;
   // With initial_T_target_source: a degenerate answer keeps the guess along the unconstrained
   // directions (proto RegisterOptions.hold_degenerate_at_initial; RegistrationResult::
   // held_at_initial).

@@ -106,6 +106,9 @@ absl::StatusOr<core::RegistrationOptions> OptionsFromProto(const v1::RegisterOpt
   if (proto.has_coarse_wide_search() && !proto.coarse_wide_search()) {
     core::SearchCoarseStagesAsTheFinest(options.refinement);
   }
+  if (proto.has_line_normals_from_planes()) {
+    options.refinement.line_normals_from_planes = proto.line_normals_from_planes();
+  }
   if (proto.has_hold_degenerate_at_initial()) {
     options.hold_degenerate_at_initial = proto.hold_degenerate_at_initial();
   }

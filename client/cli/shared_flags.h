@@ -30,6 +30,7 @@ ABSL_DECLARE_FLAG(bool, rebin_coarse_depths);
 ABSL_DECLARE_FLAG(bool, joint_finest_stage);
 ABSL_DECLARE_FLAG(bool, hold_degenerate_at_initial);
 ABSL_DECLARE_FLAG(bool, coarse_wide_search);
+ABSL_DECLARE_FLAG(bool, line_normals_from_planes);
 ABSL_DECLARE_FLAG(int, threads);
 ABSL_DECLARE_FLAG(std::string, model);
 ABSL_DECLARE_FLAG(std::string, mode);

@@ -69,18 +69,47 @@ std::pair<int, int> ShapeNodeOf(const Octree& tree, int depth, int node, int min
   return {depth, node};
 }
 
-NodeShape ShapeAt(const Octree& tree, std::pair<int, int> shape_node) {
+// TreeRefinementOptions::line_normals_from_planes: a shape is a line when its middle eigenvalue is
+// under this fraction of its largest (one scan ring's arc: ~1e-3; a cell of surface holding two
+// rings already ~0.5); an ancestor lends it its normal when the line lies within 60 degrees of
+// the ancestor's plane (|normal . line| < 0.5), looking at most this many depths up.
+constexpr double kLineEigenvalueRatio = 0.05;
+constexpr double kLineInPlaneCosine = 0.5;
+constexpr int kLineAncestorsSearched = 3;
+
+NodeShape ShapeAt(const Octree& tree, std::pair<int, int> shape_node,
+                  bool line_normals_from_planes) {
   NodeShape out;
   if (shape_node.first < 0) return out;
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
   solver.computeDirect(tree.Covariance(shape_node.first, shape_node.second).cast<double>());
   out.normal = solver.eigenvectors().col(0);  // eigenvalues ascending
   out.planar = true;
+  if (!line_normals_from_planes ||
+      !(solver.eigenvalues()[1] < kLineEigenvalueRatio * solver.eigenvalues()[2])) {
+    return out;
+  }
+  // A line: its smallest eigenvector is whichever perpendicular noise made smaller. The plane it
+  // lies on, seen by an ancestor, says which.
+  const Eigen::Vector3d line = solver.eigenvectors().col(2);
+  auto [depth, node] = shape_node;
+  for (int up = 0; up < kLineAncestorsSearched && depth > 0; ++up) {
+    node = tree.level(depth).parent[node];
+    --depth;
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> ancestor;
+    ancestor.computeDirect(tree.Covariance(depth, node).cast<double>());
+    if (ancestor.eigenvalues()[1] < kLineEigenvalueRatio * ancestor.eigenvalues()[2]) continue;
+    if (std::abs(ancestor.eigenvectors().col(0).dot(line)) < kLineInPlaneCosine) {
+      out.normal = ancestor.eigenvectors().col(0);
+    }
+    break;
+  }
   return out;
 }
 
-NodeShape ShapeOf(const Octree& tree, int depth, int node, int min_count) {
-  return ShapeAt(tree, ShapeNodeOf(tree, depth, node, min_count));
+NodeShape ShapeOf(const Octree& tree, int depth, int node, int min_count,
+                  bool line_normals_from_planes) {
+  return ShapeAt(tree, ShapeNodeOf(tree, depth, node, min_count), line_normals_from_planes);
 }
 
 // A node's regularised covariance from its shape (the shape's node may be an ancestor).
@@ -107,6 +136,7 @@ RegularizedNode Regularize(const NodeShape& shape, double edge,
 struct TargetDepth {
   int depth = 0;
   int min_count = 0;
+  bool line_normals_from_planes = false;
   double edge = 0.0;
   CellIndex index;
   size_t nodes = 0;
@@ -127,11 +157,11 @@ struct TargetDepth {
     uint8_t seen = state[j].load(std::memory_order_acquire);
     if (seen == 2) return shapes[j];
     if (seen == 0 && state[j].compare_exchange_strong(seen, 1, std::memory_order_acq_rel)) {
-      shapes[j] = ShapeOf(target, depth, j, min_count);
+      shapes[j] = ShapeOf(target, depth, j, min_count, line_normals_from_planes);
       state[j].store(2, std::memory_order_release);
       return shapes[j];
     }
-    scratch = ShapeOf(target, depth, j, min_count);
+    scratch = ShapeOf(target, depth, j, min_count, line_normals_from_planes);
     return scratch;
   }
 
@@ -148,6 +178,7 @@ struct SourceDepth {
   int depth = 0;
   double covariance_epsilon = 0.0;
   int min_count = 0;
+  bool line_normals_from_planes = false;
   WeightScheme weights = WeightScheme::kInverseDensity;
   int max_nodes = 0;
   std::vector<int32_t> nodes;
@@ -180,6 +211,7 @@ void PrepareSourceDepth(const Octree& source, int depth, const TreeRefinementOpt
   side.depth = depth;
   side.covariance_epsilon = options.covariance_epsilon;
   side.min_count = options.min_count_for_covariance;
+  side.line_normals_from_planes = options.line_normals_from_planes;
   side.weights = options.weights;
   side.max_nodes = options.max_source_nodes_per_depth;
   const double edge_source = EdgeOf(source, depth);
@@ -204,7 +236,7 @@ void PrepareSourceDepth(const Octree& source, int depth, const TreeRefinementOpt
     const std::pair<int, int> shape_node =
         ShapeNodeOf(source, depth, node, options.min_count_for_covariance);
     if (shape_node != last_shape_node) {
-      last_shape = ShapeAt(source, shape_node);
+      last_shape = ShapeAt(source, shape_node, options.line_normals_from_planes);
       last_shape_node = shape_node;
     }
     side.regularized.push_back(Regularize(last_shape, edge_source, options));
@@ -223,9 +255,11 @@ void PrepareSourceDepth(const Octree& source, int depth, const TreeRefinementOpt
 }
 
 // Fills a new (empty) side: the index now, the shapes on first use.
-void PrepareTargetDepth(const Octree& target, int depth, int min_count, TargetDepth& side) {
+void PrepareTargetDepth(const Octree& target, int depth, int min_count,
+                        bool line_normals_from_planes, TargetDepth& side) {
   side.depth = depth;
   side.min_count = min_count;
+  side.line_normals_from_planes = line_normals_from_planes;
   side.edge = EdgeOf(target, depth);
   const Octree::Level& t = target.level(depth);
   side.index = CellIndex(t.morton, depth);
@@ -257,13 +291,18 @@ DepthData MakeDepthData(const SourceDepth& source, TargetSideRef target,
 
 }  // namespace
 
-// A prepared target's sides: one per depth from the coarsest, for one min_count.
+// A prepared target's sides: one per depth from the coarsest, for one shape rule (min_count and
+// line_normals_from_planes).
 struct PreparedRefinementTarget::Sides {
   std::vector<TargetDepth> depths;  // coarse to fine
   int min_count = 0;
+  bool line_normals_from_planes = false;
 
-  const TargetDepth* Find(int depth, int min_count_wanted) const {
-    if (min_count_wanted != min_count) return nullptr;
+  const TargetDepth* Find(int depth, const TreeRefinementOptions& o) const {
+    if (o.min_count_for_covariance != min_count ||
+        o.line_normals_from_planes != line_normals_from_planes) {
+      return nullptr;
+    }
     for (const TargetDepth& side : depths) {
       if (side.depth == depth) return &side;
     }
@@ -291,8 +330,9 @@ struct TreeRefinementCache::Impl {
   const SourceDepth& Source(int depth, const TreeRefinementOptions& o) {
     for (const auto& side : sources) {
       if (side->depth == depth && side->covariance_epsilon == o.covariance_epsilon &&
-          side->min_count == o.min_count_for_covariance && side->weights == o.weights &&
-          side->max_nodes == o.max_source_nodes_per_depth) {
+          side->min_count == o.min_count_for_covariance &&
+          side->line_normals_from_planes == o.line_normals_from_planes &&
+          side->weights == o.weights && side->max_nodes == o.max_source_nodes_per_depth) {
         return *side;
       }
     }
@@ -303,20 +343,25 @@ struct TreeRefinementCache::Impl {
 
   TargetSideRef Target(int depth, const TreeRefinementOptions& o) {
     if (prepared != nullptr && &prepared->tree() == target) {
-      if (const TargetDepth* side = prepared->sides().Find(depth, o.min_count_for_covariance)) {
+      if (const TargetDepth* side = prepared->sides().Find(depth, o)) {
         return {side, true};
       }
     }
     for (const auto& side : targets) {
-      if (side->depth == depth && side->min_count == o.min_count_for_covariance) {
+      if (side->depth == depth && side->min_count == o.min_count_for_covariance &&
+          side->line_normals_from_planes == o.line_normals_from_planes) {
         return {side.get(), false};
       }
     }
     targets.push_back(std::make_unique<TargetDepth>());
     TargetDepth& made = *targets.back();
-    PrepareTargetDepth(*target, depth, o.min_count_for_covariance, made);
+    PrepareTargetDepth(*target, depth, o.min_count_for_covariance, o.line_normals_from_planes,
+                       made);
     for (const auto& side : targets) {  // link neighbouring depths, in whichever order they came
-      if (side->min_count != made.min_count) continue;
+      if (side->min_count != made.min_count ||
+          side->line_normals_from_planes != made.line_normals_from_planes) {
+        continue;
+      }
       if (side->depth == depth - 1) made.coarser = side.get();
       if (side->depth == depth + 1) side->coarser = &made;
     }
@@ -352,11 +397,13 @@ absl::StatusOr<std::shared_ptr<const PreparedRefinementTarget>> PreparedRefineme
   prepared->tree_ = &target;
   auto sides = std::make_unique<Sides>();
   sides->min_count = options.min_count_for_covariance;
+  sides->line_normals_from_planes = options.line_normals_from_planes;
   sides->depths.resize(static_cast<size_t>(target.max_depth() - coarsest + 1));
   size_t bytes = sizeof(PreparedRefinementTarget) + sizeof(Sides);
   for (int depth = coarsest; depth <= target.max_depth(); ++depth) {
     TargetDepth& side = sides->depths[static_cast<size_t>(depth - coarsest)];
-    PrepareTargetDepth(target, depth, options.min_count_for_covariance, side);
+    PrepareTargetDepth(target, depth, options.min_count_for_covariance,
+                       options.line_normals_from_planes, side);
     if (depth > coarsest) side.coarser = &sides->depths[static_cast<size_t>(depth - coarsest - 1)];
     bytes += side.bytes();
   }

@@ -161,6 +161,20 @@ struct TreeRefinementOptions {
   // Nodes with fewer points (a point or two has no shape) borrow the shape of their nearest
   // ancestor with enough points; isotropic edge^2 * I only if none has.
   int min_count_for_covariance = 3;
+  // Nodes whose points lie along a line (the middle eigenvalue of their covariance under 5% of the
+  // largest: in a sparse LiDAR scan, one ring's arc crossing a cell) have no surface normal of
+  // their own: the smallest eigenvector is whichever perpendicular noise made smaller, and a
+  // ring arc given a normal across the ring pulls consecutive scans together (the ring moves with
+  // the sensor). With this on, such a node takes the normal of its nearest ancestor (at most three
+  // depths up) that is not a line and contains it (within 60 degrees of its plane): the ground
+  // or the wall the ring lies on. Off by default: it helps sparse scanners a lot and the HDL-64E
+  // on open roads, but costs the HDL-64E's structured scenes. `rpsr odometry --local`, KITTI
+  // translation error off -> on, suburban / urban / parking / open road (README, *Sparser
+  // scanners*): VLP-16 6.11 / 31.8 / 8.18 / 55.6% -> 1.93 / 3.49 / 1.88 / 2.87%; HDL-32E 3.07 /
+  // 5.17 / 2.77 / 10.8% -> 1.61 / 2.36 / 1.34 / 1.43%; HDL-64E 0.29 / 0.82 / 1.28 / 3.71% -> 0.35
+  // / 1.07 / 2.90 / 2.11%. The proto's RegisterOptions.line_normals_from_planes, the CLI's
+  // --line_normals_from_planes.
+  bool line_normals_from_planes = false;
   // Geman-McClure kernel on the Mahalanobis distance, w = (c^2 / (c^2 + e^2))^2 with
   // c^2 = robust_scale_cells^2 / (2 covariance_epsilon): a plane-to-plane offset of
   // robust_scale_cells cell edges along the normal gets weight 1/4 at any depth.

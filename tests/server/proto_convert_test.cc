@@ -108,6 +108,17 @@ TEST(ProtoConvertTest, CoarseWideSearchIsOnUnlessTurnedOff) {
             defaults.max_correspondence_distance_cells);
 }
 
+TEST(ProtoConvertTest, LineNormalsFromPlanesIsOffUnlessTurnedOn) {
+  auto options = OptionsFromProto({});
+  ASSERT_TRUE(options.ok());
+  EXPECT_FALSE(options->refinement.line_normals_from_planes);
+  v1::RegisterOptions proto;
+  proto.set_line_normals_from_planes(true);
+  options = OptionsFromProto(proto);
+  ASSERT_TRUE(options.ok());
+  EXPECT_TRUE(options->refinement.line_normals_from_planes);
+}
+
 TEST(ProtoConvertTest, HoldingDegenerateDirectionsAtTheGuessIsOnUnlessTurnedOff) {
   auto options = OptionsFromProto({});
   ASSERT_TRUE(options.ok());

@@ -40,7 +40,8 @@ bool EveryStageReadThePreparedSide(const TreeRefinementResult& result) {
 }
 
 // Calls of every kind against one prepared target: other starts and depths, the source's own
-// cells with another epsilon, a min_count it was not prepared for (its own side is built then),
+// cells with another epsilon, a min_count or a line rule it was not prepared for (its own side is
+// built then),
 // a source shallower than the target (the finest depth is the source's), another target (the
 // prepared one does not apply) -- one cache through all of them, as the registrar's starts share
 // one, and a fresh one per call.
@@ -67,6 +68,8 @@ TEST(PreparedRefinementTargetTest, SameResultsBitForBitAsWithoutIt) {
   own_cells.covariance_epsilon = 3e-3;
   TreeRefinementOptions other_min_count;
   other_min_count.min_count_for_covariance = 5;
+  TreeRefinementOptions lines_from_planes;
+  lines_from_planes.line_normals_from_planes = true;
   TreeRefinementOptions measure;
   measure.evaluate_only = true;
   const std::vector<Call> calls = {
@@ -82,6 +85,8 @@ TEST(PreparedRefinementTargetTest, SameResultsBitForBitAsWithoutIt) {
        own_cells},
       {"min_count 5", &source, &target, Perturbed(pair->T_target_source, 5 * kDeg, 0.02, rng),
        other_min_count, false},
+      {"line normals from planes", &source, &target,
+       Perturbed(pair->T_target_source, 5 * kDeg, 0.02, rng), lines_from_planes, false},
       {"evaluate only", &source, &target, pair->T_target_source, measure},
       {"shallower source",
        &shallow_source,
