@@ -31,6 +31,7 @@ namespace {
 using ::rpsr::server::testing::MetricValue;
 using ::rpsr::server::testing::ScrapeMetrics;
 using ::rpsr::server::testing::ServiceTestClient;
+using ::rpsr::server::testing::TrackFrameRequests;
 using ::rpsr::server::testing::TransformOf;
 using ::rpsr::server::testing::UploadMessagesFor;
 using ::testing::HasSubstr;
@@ -309,14 +310,7 @@ TEST_F(ServerTest, TrackFollowsSimulatedLidarFrames) {
   const auto& poses = simulator->T_world_lidar();
   for (int frame = 0; frame < simulator->frame_count(); ++frame) {
     const std::vector<Eigen::Vector3f> points = simulator->SimulateFrame(frame).cloud.points;
-    const auto messages = UploadMessagesFor("", points, 8192);
-    for (const v1::UploadCloudRequest& message : messages) {
-      v1::TrackRequest request;
-      v1::FrameChunk* chunk = request.mutable_chunk();
-      chunk->set_frame_index(frame);
-      chunk->set_sequence(message.sequence());
-      chunk->set_point_count(message.point_count());
-      chunk->set_xyz(message.xyz());
+    for (const v1::TrackRequest& request : TrackFrameRequests(frame, points, 8192)) {
       ASSERT_TRUE(stream->Write(request));
     }
     v1::TrackResponse response;
@@ -533,13 +527,7 @@ TEST_F(ServerTest, TrackStartsFromTheLastValidMotion) {
   ASSERT_TRUE(stream->Write(start));
   std::vector<v1::TrackResponse> responses;
   for (size_t frame = 0; frame < frames.size(); ++frame) {
-    for (const v1::UploadCloudRequest& message : UploadMessagesFor("", frames[frame], 8192)) {
-      v1::TrackRequest request;
-      v1::FrameChunk* chunk = request.mutable_chunk();
-      chunk->set_frame_index(frame);
-      chunk->set_sequence(message.sequence());
-      chunk->set_point_count(message.point_count());
-      chunk->set_xyz(message.xyz());
+    for (const v1::TrackRequest& request : TrackFrameRequests(frame, frames[frame], 8192)) {
       ASSERT_TRUE(stream->Write(request));
     }
     ASSERT_TRUE(stream->Read(&responses.emplace_back())) << "no answer for frame " << frame;
@@ -957,12 +945,7 @@ TEST(ServerLifecycleTest, ShutdownFinishesWorkInFlightAndRefusesNewCalls) {
   start.mutable_start()->mutable_options()->set_mode("net+refine");
   ASSERT_TRUE(stream->Write(start));
   auto send_frame = [&](int frame, const std::vector<Eigen::Vector3f>& points) {
-    for (const v1::UploadCloudRequest& message : UploadMessagesFor("", points, 1024)) {
-      v1::TrackRequest request;
-      request.mutable_chunk()->set_frame_index(frame);
-      request.mutable_chunk()->set_sequence(message.sequence());
-      request.mutable_chunk()->set_point_count(message.point_count());
-      request.mutable_chunk()->set_xyz(message.xyz());
+    for (const v1::TrackRequest& request : TrackFrameRequests(frame, points, 1024)) {
       ASSERT_TRUE(stream->Write(request));
     }
   };

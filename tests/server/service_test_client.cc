@@ -68,6 +68,20 @@ std::vector<v1::UploadCloudRequest> UploadMessagesFor(const std::string& session
   return messages;
 }
 
+std::vector<v1::TrackRequest> TrackFrameRequests(uint64_t frame,
+                                                 const std::vector<Eigen::Vector3f>& points,
+                                                 size_t chunk_points) {
+  std::vector<v1::TrackRequest> requests;
+  for (const v1::UploadCloudRequest& message : UploadMessagesFor("", points, chunk_points)) {
+    v1::FrameChunk* chunk = requests.emplace_back().mutable_chunk();
+    chunk->set_frame_index(frame);
+    chunk->set_sequence(message.sequence());
+    chunk->set_point_count(message.point_count());
+    chunk->set_xyz(message.xyz());
+  }
+  return requests;
+}
+
 grpc::Status ServiceTestClient::Upload(const std::string& session_id,
                                        const std::vector<Eigen::Vector3f>& points,
                                        v1::UploadCloudResponse* response, size_t chunk_points) {

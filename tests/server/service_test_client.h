@@ -55,6 +55,11 @@ std::vector<v1::UploadCloudRequest> UploadMessagesFor(const std::string& session
                                                       const std::vector<Eigen::Vector3f>& points,
                                                       size_t chunk_points);
 
+// The chunks of frame `frame` of a Track stream, `chunk_points` points a message.
+std::vector<v1::TrackRequest> TrackFrameRequests(uint64_t frame,
+                                                 const std::vector<Eigen::Vector3f>& points,
+                                                 size_t chunk_points);
+
 // The /metrics text of a Prometheus exposer on 127.0.0.1:port (empty on failure).
 std::string ScrapeMetrics(int port);
 // The value of the first sample of `name` whose labels include every `labels` pair, or nullopt.

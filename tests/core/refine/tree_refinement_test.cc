@@ -259,42 +259,57 @@ TEST(TreeRefinementTest, SimulatedLidarPairFiveFramesApartFromIdentity) {
   EXPECT_GT(result->fitness, 0.3);
 }
 
-// Consecutive frames of a simulated 10 Hz suburban sequence, each refined from the previous
-// frame's true motion (what `rpsr odometry` does with its estimate), as the joint finest stage's
-// coarser depth weighs its cells by inverse density (the default) or counts them: counted, the
-// re-binned cells near the sensor, holding arcs of the rings that move with it, pulled every
-// estimate the same way and odometry drifted (TreeRefinementOptions::joint_coarser_weights).
-// Here the mean error vector a frame is 1.61 mm counted and 0.45 mm by inverse density.
+// Consecutive frames of a simulated 10 Hz sequence as trees of depth 9, each frame refined onto
+// the previous one from the previous frame's true motion (what `rpsr odometry` does with its
+// estimate).
+class ConsecutiveScans {
+ public:
+  explicit ConsecutiveScans(const LidarSequenceOptions& options) {
+    auto sequence = LidarSequenceSimulator::Create(options);
+    EXPECT_TRUE(sequence.ok()) << sequence.status();
+    if (!sequence.ok()) return;
+    for (int f = 0; f < options.frame_count; ++f) {
+      trees_.push_back(RefinementTree(sequence->SimulateFrame(f).cloud, 9));
+    }
+    poses_ = sequence->T_world_lidar();
+  }
+
+  // The length of the mean error vector of the translations a frame (mm): what adds up along a
+  // trajectory (noise averages out of it).
+  double BiasMm(const TreeRefinementOptions& refinement) const {
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    const int frames = static_cast<int>(trees_.size());
+    for (int f = 2; f < frames; ++f) {
+      const Eigen::Isometry3d truth = poses_[f - 1].inverse() * poses_[f];
+      const Eigen::Isometry3d previous = poses_[f - 2].inverse() * poses_[f - 1];
+      auto result = RefineOnTrees(trees_[f], trees_[f - 1], previous, refinement);
+      EXPECT_TRUE(result.ok()) << result.status();
+      if (result.ok()) sum += 1e3 * (result->T_target_source.translation() - truth.translation());
+    }
+    return frames > 2 ? (sum / (frames - 2)).norm() : 0.0;
+  }
+
+ private:
+  std::vector<Octree> trees_;
+  std::vector<Eigen::Isometry3d> poses_;
+};
+
+// The joint finest stage's coarser depth weighs its cells by inverse density (the default) or
+// counts them: counted, the re-binned cells near the sensor, holding arcs of the rings that move
+// with it, pulled every estimate the same way and odometry drifted
+// (TreeRefinementOptions::joint_coarser_weights). A suburban street; here the mean error vector a
+// frame is 1.61 mm counted and 0.45 mm by inverse density.
 TEST(TreeRefinementTest, JointStageCoarserDepthDoesNotPullConsecutiveScans) {
   LidarSequenceOptions options;
   options.style = StreetStyle::kSuburban;
   options.frame_count = 25;
   options.seed = 11;
-  auto sequence = LidarSequenceSimulator::Create(options);
-  ASSERT_TRUE(sequence.ok()) << sequence.status();
-  std::vector<Octree> trees;
-  for (int f = 0; f < options.frame_count; ++f) {
-    trees.push_back(RefinementTree(sequence->SimulateFrame(f).cloud, 9));
-  }
-  const auto& poses = sequence->T_world_lidar();
-  // The length of the mean error vector of the translations (mm): what adds up along a trajectory
-  // (noise averages out of it).
-  auto bias_mm = [&](WeightScheme weights) {
-    TreeRefinementOptions refinement;
-    refinement.joint_coarser_weights = weights;
-    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-    for (int f = 2; f < options.frame_count; ++f) {
-      const Eigen::Isometry3d truth = poses[f - 1].inverse() * poses[f];
-      const Eigen::Isometry3d previous = poses[f - 2].inverse() * poses[f - 1];
-      auto result = RefineOnTrees(trees[f], trees[f - 1], previous, refinement);
-      EXPECT_TRUE(result.ok()) << result.status();
-      sum += 1e3 * (result->T_target_source.translation() - truth.translation());
-    }
-    return (sum / (options.frame_count - 2)).norm();
-  };
+  const ConsecutiveScans scans(options);
   EXPECT_EQ(TreeRefinementOptions{}.joint_coarser_weights, WeightScheme::kInverseDensity);
-  const double counted = bias_mm(WeightScheme::kUniform);
-  const double inverse_density = bias_mm(WeightScheme::kInverseDensity);
+  TreeRefinementOptions counted_cells;
+  counted_cells.joint_coarser_weights = WeightScheme::kUniform;
+  const double counted = scans.BiasMm(counted_cells);
+  const double inverse_density = scans.BiasMm({});
   std::printf(
       "mean translation error vector a frame: cells counted %.2f mm, inverse density %.2f "
       "mm\n",
@@ -302,12 +317,12 @@ TEST(TreeRefinementTest, JointStageCoarserDepthDoesNotPullConsecutiveScans) {
   EXPECT_LT(inverse_density, 0.5 * counted);
 }
 
-// TreeRefinementOptions::line_normals_from_planes: consecutive frames of a simulated VLP-16 (16
-// beams, +-15 degrees, 1,800 azimuths) on a suburban street, each refined from the previous
-// frame's true motion. Most depth-9 cells of such a scan hold one ring's arc; given normals
-// across the ring, they pulled every estimate short (the rings move with the sensor). Taking the
-// ground's or the wall's normal from an ancestor, the bias a frame is a fraction of that (here
-// the mean error vector a frame is 328 mm with their own normals and 8 mm with the planes').
+// TreeRefinementOptions::line_normals_from_planes: a simulated VLP-16 (16 beams, +-15 degrees,
+// 1,800 azimuths) on a suburban street. Most depth-9 cells of such a scan hold one ring's arc;
+// given normals across the ring, they pulled every estimate short (the rings move with the
+// sensor). Taking the ground's or the wall's normal from an ancestor, the bias a frame is a
+// fraction of that (here the mean error vector a frame is 328 mm with their own normals and 8 mm
+// with the planes').
 TEST(TreeRefinementTest, LineNodesTakingTheirPlanesNormalDoNotPullSparseScansTogether) {
   LidarSequenceOptions options;
   options.style = StreetStyle::kSuburban;
@@ -317,29 +332,12 @@ TEST(TreeRefinementTest, LineNodesTakingTheirPlanesNormalDoNotPullSparseScansTog
   options.sensor.max_elevation_deg = 15.0;
   options.sensor.min_elevation_deg = -15.0;
   options.sensor.azimuth_steps = 1800;
-  auto sequence = LidarSequenceSimulator::Create(options);
-  ASSERT_TRUE(sequence.ok()) << sequence.status();
-  std::vector<Octree> trees;
-  for (int f = 0; f < options.frame_count; ++f) {
-    trees.push_back(RefinementTree(sequence->SimulateFrame(f).cloud, 9));
-  }
-  const auto& poses = sequence->T_world_lidar();
-  auto bias_mm = [&](bool line_normals_from_planes) {
-    TreeRefinementOptions refinement;
-    refinement.line_normals_from_planes = line_normals_from_planes;
-    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-    for (int f = 2; f < options.frame_count; ++f) {
-      const Eigen::Isometry3d truth = poses[f - 1].inverse() * poses[f];
-      const Eigen::Isometry3d previous = poses[f - 2].inverse() * poses[f - 1];
-      auto result = RefineOnTrees(trees[f], trees[f - 1], previous, refinement);
-      EXPECT_TRUE(result.ok()) << result.status();
-      sum += 1e3 * (result->T_target_source.translation() - truth.translation());
-    }
-    return (sum / (options.frame_count - 2)).norm();
-  };
+  const ConsecutiveScans scans(options);
   EXPECT_FALSE(TreeRefinementOptions{}.line_normals_from_planes);
-  const double own = bias_mm(false);
-  const double borrowed = bias_mm(true);
+  TreeRefinementOptions from_planes;
+  from_planes.line_normals_from_planes = true;
+  const double own = scans.BiasMm({});
+  const double borrowed = scans.BiasMm(from_planes);
   std::printf("mean translation error vector a frame: own normals %.1f mm, planes' %.1f mm\n", own,
               borrowed);
   EXPECT_LT(borrowed, 0.5 * own);
