@@ -445,6 +445,14 @@ int RunOdometryCommand(const std::vector<std::string>& args) {
       held > 0
           ? absl::StrFormat(" (%d degenerate, held at the previous motion along it)", held).c_str()
           : "");
+  // Many degenerate frames on a street usually mean ring arcs read as planes across the rings
+  // (README, *Sparser scanners drift more*): say what helps.
+  if (!absl::GetFlag(FLAGS_line_normals_from_planes) && pairs > 0 && 5 * invalid >= pairs) {
+    std::printf(
+        "hint: %d of %d pairs not valid; for a 16- or 32-beam scanner, or an open road, try "
+        "--line_normals_from_planes\n",
+        invalid, pairs);
+  }
   std::printf("poses (%s, KITTI format) written to %s\n",
               truth.T_camera_lidar ? "camera 0 frame" : "LiDAR frame", output.c_str());
   if (metrics) {
