@@ -69,6 +69,18 @@ std::pair<int, int> ShapeNodeOf(const Octree& tree, int depth, int node, int min
   return {depth, node};
 }
 
+// How nodes get their shapes (what a side's shapes depend on besides the tree and the depth):
+// TreeRefinementOptions::min_count_for_covariance and line_normals_from_planes.
+struct ShapeRule {
+  int min_count = 0;
+  bool line_normals_from_planes = false;
+  bool operator==(const ShapeRule&) const = default;
+};
+
+ShapeRule ShapeRuleOf(const TreeRefinementOptions& options) {
+  return {options.min_count_for_covariance, options.line_normals_from_planes};
+}
+
 // TreeRefinementOptions::line_normals_from_planes: a shape is a line when its middle eigenvalue is
 // under this fraction of its largest (one scan ring's arc: ~1e-3; a cell of surface holding two
 // rings already ~0.5); an ancestor lends it its normal when the line lies within 60 degrees of
@@ -76,6 +88,10 @@ std::pair<int, int> ShapeNodeOf(const Octree& tree, int depth, int node, int min
 constexpr double kLineEigenvalueRatio = 0.05;
 constexpr double kLineInPlaneCosine = 0.5;
 constexpr int kLineAncestorsSearched = 3;
+
+bool IsLine(const Eigen::Vector3d& ascending_eigenvalues) {
+  return ascending_eigenvalues[1] < kLineEigenvalueRatio * ascending_eigenvalues[2];
+}
 
 NodeShape ShapeAt(const Octree& tree, std::pair<int, int> shape_node,
                   bool line_normals_from_planes) {
@@ -85,10 +101,7 @@ NodeShape ShapeAt(const Octree& tree, std::pair<int, int> shape_node,
   solver.computeDirect(tree.Covariance(shape_node.first, shape_node.second).cast<double>());
   out.normal = solver.eigenvectors().col(0);  // eigenvalues ascending
   out.planar = true;
-  if (!line_normals_from_planes ||
-      !(solver.eigenvalues()[1] < kLineEigenvalueRatio * solver.eigenvalues()[2])) {
-    return out;
-  }
+  if (!line_normals_from_planes || !IsLine(solver.eigenvalues())) return out;
   // A line: its smallest eigenvector is whichever perpendicular noise made smaller. The plane it
   // lies on, seen by an ancestor, says which.
   const Eigen::Vector3d line = solver.eigenvectors().col(2);
@@ -98,7 +111,7 @@ NodeShape ShapeAt(const Octree& tree, std::pair<int, int> shape_node,
     --depth;
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> ancestor;
     ancestor.computeDirect(tree.Covariance(depth, node).cast<double>());
-    if (ancestor.eigenvalues()[1] < kLineEigenvalueRatio * ancestor.eigenvalues()[2]) continue;
+    if (IsLine(ancestor.eigenvalues())) continue;
     if (std::abs(ancestor.eigenvectors().col(0).dot(line)) < kLineInPlaneCosine) {
       out.normal = ancestor.eigenvectors().col(0);
     }
@@ -107,9 +120,9 @@ NodeShape ShapeAt(const Octree& tree, std::pair<int, int> shape_node,
   return out;
 }
 
-NodeShape ShapeOf(const Octree& tree, int depth, int node, int min_count,
-                  bool line_normals_from_planes) {
-  return ShapeAt(tree, ShapeNodeOf(tree, depth, node, min_count), line_normals_from_planes);
+NodeShape ShapeOf(const Octree& tree, int depth, int node, const ShapeRule& rule) {
+  return ShapeAt(tree, ShapeNodeOf(tree, depth, node, rule.min_count),
+                 rule.line_normals_from_planes);
 }
 
 // A node's regularised covariance from its shape (the shape's node may be an ancestor).
@@ -127,22 +140,21 @@ RegularizedNode Regularize(const NodeShape& shape, double edge,
 
 // The target's side of one depth: its cell index (Morton code -> node, cell_index.h) and its nodes'
 // shapes (the regularisation's epsilon is applied where they are read, so one side serves the
-// coarse and the fine epsilon). It depends on the target tree, the depth and min_count alone, so
-// the rounds of a re-binned depth and the registrar's several starts on one pair share it
+// coarse and the fine epsilon). It depends on the target tree, the depth and the shape rule alone,
+// so the rounds of a re-binned depth and the registrar's several starts on one pair share it
 // (TreeRefinementCache), and a PreparedRefinementTarget shares it among pairs and threads.
 // Shapes are computed on first use (only nodes ever matched pay the eigen-decomposition), also
 // when shared: a node's state goes 0 -> 1 (claimed by the one thread that computes it) -> 2 (its
 // shape is written and published); a thread that finds it claimed computes a copy of its own.
 struct TargetDepth {
   int depth = 0;
-  int min_count = 0;
-  bool line_normals_from_planes = false;
+  ShapeRule rule;
   double edge = 0.0;
   CellIndex index;
   size_t nodes = 0;
   mutable std::unique_ptr<NodeShape[]> shapes;
   mutable std::unique_ptr<std::atomic<uint8_t>[]> state;
-  // The side of depth - 1 (same tree and min_count) when its owner holds one: a node too sparse
+  // The side of depth - 1 (same tree and shape rule) when its owner holds one: a node too sparse
   // for a shape reads its parent's there (ShapeOf walks up the same way, so the value is the
   // same), and siblings share one eigen-decomposition instead of one each (at an object's finest
   // depth most nodes hold one or two points).
@@ -151,17 +163,17 @@ struct TargetDepth {
   // Node j's shape: the published one, or computed now (into `scratch` when another thread is
   // computing the published one).
   const NodeShape& Shape(const Octree& target, int j, NodeShape& scratch) const {
-    if (coarser != nullptr && static_cast<int>(target.level(depth).count[j]) < min_count) {
+    if (coarser != nullptr && static_cast<int>(target.level(depth).count[j]) < rule.min_count) {
       return coarser->Shape(target, target.level(depth).parent[j], scratch);
     }
     uint8_t seen = state[j].load(std::memory_order_acquire);
     if (seen == 2) return shapes[j];
     if (seen == 0 && state[j].compare_exchange_strong(seen, 1, std::memory_order_acq_rel)) {
-      shapes[j] = ShapeOf(target, depth, j, min_count, line_normals_from_planes);
+      shapes[j] = ShapeOf(target, depth, j, rule);
       state[j].store(2, std::memory_order_release);
       return shapes[j];
     }
-    scratch = ShapeOf(target, depth, j, min_count, line_normals_from_planes);
+    scratch = ShapeOf(target, depth, j, rule);
     return scratch;
   }
 
@@ -177,8 +189,7 @@ struct TargetDepth {
 struct SourceDepth {
   int depth = 0;
   double covariance_epsilon = 0.0;
-  int min_count = 0;
-  bool line_normals_from_planes = false;
+  ShapeRule rule;
   WeightScheme weights = WeightScheme::kInverseDensity;
   int max_nodes = 0;
   std::vector<int32_t> nodes;
@@ -210,8 +221,7 @@ void PrepareSourceDepth(const Octree& source, int depth, const TreeRefinementOpt
                         SourceDepth& side) {
   side.depth = depth;
   side.covariance_epsilon = options.covariance_epsilon;
-  side.min_count = options.min_count_for_covariance;
-  side.line_normals_from_planes = options.line_normals_from_planes;
+  side.rule = ShapeRuleOf(options);
   side.weights = options.weights;
   side.max_nodes = options.max_source_nodes_per_depth;
   const double edge_source = EdgeOf(source, depth);
@@ -255,11 +265,9 @@ void PrepareSourceDepth(const Octree& source, int depth, const TreeRefinementOpt
 }
 
 // Fills a new (empty) side: the index now, the shapes on first use.
-void PrepareTargetDepth(const Octree& target, int depth, int min_count,
-                        bool line_normals_from_planes, TargetDepth& side) {
+void PrepareTargetDepth(const Octree& target, int depth, const ShapeRule& rule, TargetDepth& side) {
   side.depth = depth;
-  side.min_count = min_count;
-  side.line_normals_from_planes = line_normals_from_planes;
+  side.rule = rule;
   side.edge = EdgeOf(target, depth);
   const Octree::Level& t = target.level(depth);
   side.index = CellIndex(t.morton, depth);
@@ -291,18 +299,13 @@ DepthData MakeDepthData(const SourceDepth& source, TargetSideRef target,
 
 }  // namespace
 
-// A prepared target's sides: one per depth from the coarsest, for one shape rule (min_count and
-// line_normals_from_planes).
+// A prepared target's sides: one per depth from the coarsest, for one shape rule.
 struct PreparedRefinementTarget::Sides {
   std::vector<TargetDepth> depths;  // coarse to fine
-  int min_count = 0;
-  bool line_normals_from_planes = false;
+  ShapeRule rule;
 
-  const TargetDepth* Find(int depth, const TreeRefinementOptions& o) const {
-    if (o.min_count_for_covariance != min_count ||
-        o.line_normals_from_planes != line_normals_from_planes) {
-      return nullptr;
-    }
+  const TargetDepth* Find(int depth, const ShapeRule& wanted) const {
+    if (wanted != rule) return nullptr;
     for (const TargetDepth& side : depths) {
       if (side.depth == depth) return &side;
     }
@@ -330,9 +333,8 @@ struct TreeRefinementCache::Impl {
   const SourceDepth& Source(int depth, const TreeRefinementOptions& o) {
     for (const auto& side : sources) {
       if (side->depth == depth && side->covariance_epsilon == o.covariance_epsilon &&
-          side->min_count == o.min_count_for_covariance &&
-          side->line_normals_from_planes == o.line_normals_from_planes &&
-          side->weights == o.weights && side->max_nodes == o.max_source_nodes_per_depth) {
+          side->rule == ShapeRuleOf(o) && side->weights == o.weights &&
+          side->max_nodes == o.max_source_nodes_per_depth) {
         return *side;
       }
     }
@@ -343,25 +345,20 @@ struct TreeRefinementCache::Impl {
 
   TargetSideRef Target(int depth, const TreeRefinementOptions& o) {
     if (prepared != nullptr && &prepared->tree() == target) {
-      if (const TargetDepth* side = prepared->sides().Find(depth, o)) {
+      if (const TargetDepth* side = prepared->sides().Find(depth, ShapeRuleOf(o))) {
         return {side, true};
       }
     }
     for (const auto& side : targets) {
-      if (side->depth == depth && side->min_count == o.min_count_for_covariance &&
-          side->line_normals_from_planes == o.line_normals_from_planes) {
+      if (side->depth == depth && side->rule == ShapeRuleOf(o)) {
         return {side.get(), false};
       }
     }
     targets.push_back(std::make_unique<TargetDepth>());
     TargetDepth& made = *targets.back();
-    PrepareTargetDepth(*target, depth, o.min_count_for_covariance, o.line_normals_from_planes,
-                       made);
+    PrepareTargetDepth(*target, depth, ShapeRuleOf(o), made);
     for (const auto& side : targets) {  // link neighbouring depths, in whichever order they came
-      if (side->min_count != made.min_count ||
-          side->line_normals_from_planes != made.line_normals_from_planes) {
-        continue;
-      }
+      if (side->rule != made.rule) continue;
       if (side->depth == depth - 1) made.coarser = side.get();
       if (side->depth == depth + 1) side->coarser = &made;
     }
@@ -396,14 +393,12 @@ absl::StatusOr<std::shared_ptr<const PreparedRefinementTarget>> PreparedRefineme
   std::shared_ptr<PreparedRefinementTarget> prepared(new PreparedRefinementTarget());
   prepared->tree_ = &target;
   auto sides = std::make_unique<Sides>();
-  sides->min_count = options.min_count_for_covariance;
-  sides->line_normals_from_planes = options.line_normals_from_planes;
+  sides->rule = ShapeRuleOf(options);
   sides->depths.resize(static_cast<size_t>(target.max_depth() - coarsest + 1));
   size_t bytes = sizeof(PreparedRefinementTarget) + sizeof(Sides);
   for (int depth = coarsest; depth <= target.max_depth(); ++depth) {
     TargetDepth& side = sides->depths[static_cast<size_t>(depth - coarsest)];
-    PrepareTargetDepth(target, depth, options.min_count_for_covariance,
-                       options.line_normals_from_planes, side);
+    PrepareTargetDepth(target, depth, sides->rule, side);
     if (depth > coarsest) side.coarser = &sides->depths[static_cast<size_t>(depth - coarsest - 1)];
     bytes += side.bytes();
   }
