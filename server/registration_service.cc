@@ -691,13 +691,7 @@ class TrackReactor final : public grpc::ServerBidiReactor<v1::TrackRequest, v1::
     }
     const Eigen::Isometry3d& relative = outcome->result.T_target_source;
     accumulated_ = accumulated_ * relative;
-    // The next frame starts from this motion when it is one to trust: valid, or held at the
-    // previous motion along its degenerate directions (RegisterOptions.hold_degenerate_at_initial).
-    // An invalid answer (too little overlap, a wrong start) keeps the last such motion, as `rpsr
-    // odometry --local` does.
-    if (outcome->result.valid || outcome->result.held_at_initial) {
-      last_relative_ = relative;
-    }
+    if (core::StartsNextFrame(outcome->result)) last_relative_ = relative;
     previous_ = std::move(current_);
     v1::RegistrationResult* result = response_.mutable_relative();
     ResultToProto(outcome->result, result);

@@ -238,10 +238,7 @@ absl::StatusOr<std::vector<Step>> RunLocally(const std::vector<std::string>& fra
     }
     steps.push_back({result->T_target_source, result->valid, result->confidence,
                      result->held_at_initial, result->timings.total_seconds, 0.0});
-    // An invalid step keeps the last good motion as the next start; one held at that motion along
-    // its degenerate directions (--hold_degenerate_at_initial) is that motion measured elsewhere.
-    // (The server's Track stream does the same.)
-    if (result->valid || result->held_at_initial) motion = result->T_target_source;
+    if (core::StartsNextFrame(*result)) motion = result->T_target_source;
     previous = *std::move(current);
     previous_tree = *std::move(tree);
     if (!quiet) progress.Update(static_cast<int>(i + 1));

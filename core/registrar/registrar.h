@@ -141,6 +141,15 @@ struct RegistrationResult {
   std::vector<double> confidence_features;
 };
 
+// Whether a tracker may start its next frame from this answer (a constant-velocity prior): it is
+// valid, or held at the previous motion along its degenerate directions and measured elsewhere
+// (RegistrationOptions::hold_degenerate_at_initial). Any other invalid answer (too little overlap,
+// a wrong start) leaves the last such motion in place. rpsrd's Track stream and `rpsr odometry
+// --local` both follow it.
+inline bool StartsNextFrame(const RegistrationResult& result) {
+  return result.valid || result.held_at_initial;
+}
+
 class NetTargetEncoding;  // core/net/rpsr_net.h
 
 // A target's share of the work of registering against it, done once (Registrar::PrepareTarget)
