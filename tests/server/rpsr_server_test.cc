@@ -103,6 +103,25 @@ class ServerTest : public ::testing::Test {
     ASSERT_TRUE(client_->CreateSession(&session_).ok());
   }
 
+  // A Track stream, its start written: a new session of depth-8 trees, mode refine, each frame
+  // started from the previous motion (what odometry asks for); `options` can add to that.
+  std::unique_ptr<grpc::ClientReaderWriter<v1::TrackRequest, v1::TrackResponse>> StartLidarTrack(
+      grpc::ClientContext* context, v1::RegisterOptions options = {}) {
+    std::string lidar_session;
+    v1::SessionOptions session_options;
+    session_options.set_tree_max_depth(8);
+    EXPECT_TRUE(client_->CreateSession(&lidar_session, session_options).ok());
+    client_->Prepare(context);
+    auto stream = client_->stub().Track(context);
+    v1::TrackRequest start;
+    start.mutable_start()->set_session_id(lidar_session);
+    options.set_mode("refine");
+    *start.mutable_start()->mutable_options() = options;
+    start.mutable_start()->set_constant_velocity_prior(true);
+    EXPECT_TRUE(stream->Write(start));
+    return stream;
+  }
+
   uint64_t UploadOrDie(const std::vector<Eigen::Vector3f>& points) {
     v1::UploadCloudResponse response;
     const grpc::Status status = client_->Upload(session_, points, &response);
@@ -294,19 +313,8 @@ TEST_F(ServerTest, TrackFollowsSimulatedLidarFrames) {
   auto simulator = core::LidarSequenceSimulator::Create(options);
   ASSERT_TRUE(simulator.ok()) << simulator.status();
 
-  std::string lidar_session;
-  v1::SessionOptions session_options;
-  session_options.set_tree_max_depth(8);
-  ASSERT_TRUE(client_->CreateSession(&lidar_session, session_options).ok());
-
   grpc::ClientContext context;
-  client_->Prepare(&context);
-  auto stream = client_->stub().Track(&context);
-  v1::TrackRequest start;
-  start.mutable_start()->set_session_id(lidar_session);
-  start.mutable_start()->mutable_options()->set_mode("refine");
-  start.mutable_start()->set_constant_velocity_prior(true);
-  ASSERT_TRUE(stream->Write(start));
+  auto stream = StartLidarTrack(&context);
   const auto& poses = simulator->T_world_lidar();
   for (int frame = 0; frame < simulator->frame_count(); ++frame) {
     const std::vector<Eigen::Vector3f> points = simulator->SimulateFrame(frame).cloud.points;
@@ -512,19 +520,10 @@ TEST_F(ServerTest, TrackStartsFromTheLastValidMotion) {
   frames.push_back(flat);
   frames.push_back(simulator->SimulateFrame(2).cloud.points);
 
-  std::string lidar_session;
-  v1::SessionOptions session_options;
-  session_options.set_tree_max_depth(8);
-  ASSERT_TRUE(client_->CreateSession(&lidar_session, session_options).ok());
   grpc::ClientContext context;
-  client_->Prepare(&context);
-  auto stream = client_->stub().Track(&context);
-  v1::TrackRequest start;
-  start.mutable_start()->set_session_id(lidar_session);
-  start.mutable_start()->mutable_options()->set_mode("refine");
-  start.mutable_start()->mutable_options()->set_hold_degenerate_at_initial(false);
-  start.mutable_start()->set_constant_velocity_prior(true);
-  ASSERT_TRUE(stream->Write(start));
+  v1::RegisterOptions drift_kept;
+  drift_kept.set_hold_degenerate_at_initial(false);
+  auto stream = StartLidarTrack(&context, drift_kept);
   std::vector<v1::TrackResponse> responses;
   for (size_t frame = 0; frame < frames.size(); ++frame) {
     for (const v1::TrackRequest& request : TrackFrameRequests(frame, frames[frame], 8192)) {
