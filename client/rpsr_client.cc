@@ -102,6 +102,7 @@ RegistrationResult FromProto(const rpsr::v1::RegistrationResult& in) {
   }
   out.num_degenerate = in.num_degenerate();
   out.held_at_initial = in.held_at_initial();
+  out.line_normals_from_planes = in.line_normals_from_planes();
   out.net_T_target_source = FromProto(in.net_transform_target_source());
   out.net_score_peak = in.net_score_peak();
   out.start = in.start();
@@ -125,7 +126,9 @@ void ToProto(const RegisterOptions& in, rpsr::v1::RegisterOptions* out) {
   out->set_rebin_coarse_depths(in.rebin_coarse_depths);
   out->set_joint_finest_stage(in.joint_finest_stage);
   out->set_coarse_wide_search(in.coarse_wide_search);
-  out->set_line_normals_from_planes(in.line_normals_from_planes);
+  if (in.line_normals_from_planes.has_value()) {
+    out->set_line_normals_from_planes(*in.line_normals_from_planes);
+  }
   out->set_hold_degenerate_at_initial(in.hold_degenerate_at_initial);
 }
 

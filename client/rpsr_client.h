@@ -155,8 +155,9 @@ struct RegisterOptions {
   // one, as the finest stage, ~1.1 ms less an object's refinement).
   bool coarse_wide_search = true;
   // Line-shaped nodes (a sparse scan's ring arcs) take their ancestor plane's normal (proto
-  // RegisterOptions.line_normals_from_planes): for 16- and 32-beam scanners.
-  bool line_normals_from_planes = false;
+  // RegisterOptions.line_normals_from_planes): for 16- and 32-beam scanners. Unset: the server
+  // chooses per pair (RegistrationResult::line_normals_from_planes says which ran).
+  std::optional<bool> line_normals_from_planes;
   // With initial_T_target_source: a degenerate answer keeps the guess along the unconstrained
   // directions (proto RegisterOptions.hold_degenerate_at_initial; RegistrationResult::
   // held_at_initial).
@@ -193,6 +194,8 @@ struct RegistrationResult {
   int num_degenerate = 0;
   // The pose along the degenerate directions is the initial guess's (hold_degenerate_at_initial).
   bool held_at_initial = false;
+  // Whether line-shaped nodes took their ancestor plane's normal (as asked, or as chosen).
+  bool line_normals_from_planes = false;
   Eigen::Isometry3d net_T_target_source = Eigen::Isometry3d::Identity();
   double net_score_peak = 0.0;
   std::string mode;

@@ -133,6 +133,7 @@ void ResultToProto(const core::RegistrationResult& result, v1::RegistrationResul
   proto->clear_degenerate_axes();
   for (bool axis : result.degenerate_axes) proto->add_degenerate_axes(axis);
   proto->set_held_at_initial(result.held_at_initial);
+  proto->set_line_normals_from_planes(result.line_normals_from_planes);
   proto->set_num_degenerate(result.num_degenerate);
   TransformToProto(result.net_T_target_source, proto->mutable_net_transform_target_source());
   proto->set_net_score_peak(result.net_score_peak);

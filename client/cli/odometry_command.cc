@@ -161,6 +161,8 @@ struct Step {
   // Invalid, but held at the previous motion along its degenerate directions
   // (--hold_degenerate_at_initial).
   bool held = false;
+  // Line-shaped nodes took their ancestor plane's normal (--line_normals_from_planes, or chosen).
+  bool line_normals = false;
   // Where the time of a frame went: the registrar's share, and (on a server) the whole round trip
   // of the frame (upload, tree, registration, answer) as the client saw it.
   double registrar_seconds = 0.0;
@@ -237,7 +239,8 @@ absl::StatusOr<std::vector<Step>> RunLocally(const std::vector<std::string>& fra
                           absl::StrCat("frame ", i, ": ", result.status().message()));
     }
     steps.push_back({result->T_target_source, result->valid, result->confidence,
-                     result->held_at_initial, result->timings.total_seconds, 0.0});
+                     result->held_at_initial, result->line_normals_from_planes,
+                     result->timings.total_seconds, 0.0});
     if (core::StartsNextFrame(*result)) motion = result->T_target_source;
     previous = *std::move(current);
     previous_tree = *std::move(tree);
@@ -289,6 +292,7 @@ absl::StatusOr<std::vector<Step>> RunOnServer(const std::vector<std::string>& fr
       }
       steps.push_back({frame->relative->T_target_source, frame->relative->valid,
                        frame->relative->confidence, frame->relative->held_at_initial,
+                       frame->relative->line_normals_from_planes,
                        frame->relative->timings.registrar_seconds, frame->round_trip_seconds});
     }
     if (!quiet) progress.Update(static_cast<int>(i + 1));
@@ -370,12 +374,14 @@ int RunOdometryCommand(const std::vector<std::string>& args) {
   std::vector<Eigen::Isometry3d> T_world_lidar = {Eigen::Isometry3d::Identity()};
   int invalid = 0;
   int held = 0;
+  int line_normals = 0;
   double registrar_seconds = 0.0;
   double round_trip_seconds = 0.0;
   for (const Step& step : *steps) {
     T_world_lidar.push_back(T_world_lidar.back() * step.T_previous_current);
     if (!step.valid) ++invalid;
     if (step.held) ++held;
+    if (step.line_normals) ++line_normals;
     registrar_seconds += step.registrar_seconds;
     round_trip_seconds += step.round_trip_seconds;
   }
@@ -415,15 +421,15 @@ int RunOdometryCommand(const std::vector<std::string>& args) {
   if (json) {
     std::printf(
         "{\"sequence\": %s, \"where\": %s, \"frames\": %d, \"pairs\": %d, \"invalid_pairs\": %d, "
-        "\"held_pairs\": %d, "
+        "\"held_pairs\": %d, \"line_normals_from_planes_pairs\": %d, "
         "\"seconds\": %.3f, \"ms_per_pair\": %.3f, \"registrar_ms_per_pair\": %.3f, "
         "\"round_trip_ms_per_frame\": %.3f, \"poses\": %s, \"pose_frame\": %s, \"plot\": "
         "%s, \"metrics\": %s}\n",
         JsonString(sequence_dir.string()).c_str(),
         JsonString(*use_server ? absl::GetFlag(FLAGS_server) : "local").c_str(), frame_count, pairs,
-        invalid, held, seconds, 1e3 * seconds / pairs, 1e3 * registrar_seconds / pairs,
-        1e3 * round_trip_seconds / pairs, JsonString(output).c_str(),
-        JsonString(truth.T_camera_lidar ? "camera0" : "lidar").c_str(),
+        invalid, held, line_normals, seconds, 1e3 * seconds / pairs,
+        1e3 * registrar_seconds / pairs, 1e3 * round_trip_seconds / pairs,
+        JsonString(output).c_str(), JsonString(truth.T_camera_lidar ? "camera0" : "lidar").c_str(),
         JsonString(plot == "none" ? "" : plot).c_str(),
         metrics ? MetricsJson(*metrics).c_str() : "null");
     return 0;
@@ -442,9 +448,14 @@ int RunOdometryCommand(const std::vector<std::string>& args) {
       held > 0
           ? absl::StrFormat(" (%d degenerate, held at the previous motion along it)", held).c_str()
           : "");
+  std::printf(
+      "line-shaped nodes took their planes' normals in %d of %d pairs%s\n", line_normals, pairs,
+      ExplicitLineNormalsFlag().has_value()
+          ? " (as --line_normals_from_planes asked)"
+          : " (chosen per pair from the scans; --line_normals_from_planes[=false] overrides)");
   // Many degenerate frames on a street usually mean ring arcs read as planes across the rings
   // (README, *Sparser scanners drift more*): say what helps.
-  if (!absl::GetFlag(FLAGS_line_normals_from_planes) && pairs > 0 && 5 * invalid >= pairs) {
+  if (line_normals < pairs && pairs > 0 && 5 * invalid >= pairs) {
     std::printf(
         "hint: %d of %d pairs not valid; for a 16- or 32-beam scanner, or an open road, try "
         "--line_normals_from_planes\n",

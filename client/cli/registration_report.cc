@@ -40,6 +40,7 @@ PairReport ReportOf(const core::RegistrationResult& result, double seconds) {
   report.start = result.start;
   report.starts = result.starts;
   report.held_at_initial = result.held_at_initial;
+  report.line_normals_from_planes = result.line_normals_from_planes;
   report.seconds = seconds;
   return report;
 }
@@ -58,6 +59,7 @@ PairReport ReportOf(const RegistrationResult& result) {
   report.start = result.start;
   report.starts = result.starts;
   report.held_at_initial = result.held_at_initial;
+  report.line_normals_from_planes = result.line_normals_from_planes;
   report.seconds = result.round_trip_seconds;
   return report;
 }
@@ -140,6 +142,7 @@ std::string FormatReportJson(const PairReport& report) {
       ", \"iterations\": ", report.iterations, ", \"mode\": ", JsonString(report.mode),
       ", \"start\": ", JsonString(report.start), ", \"starts\": ", report.starts,
       ", \"held_at_initial\": ", report.held_at_initial ? "true" : "false",
+      ", \"line_normals_from_planes\": ", report.line_normals_from_planes ? "true" : "false",
       ", \"seconds\": ", absl::StrFormat("%.6f", report.seconds));
   if (report.truth) {
     const core::PairError error = core::ErrorOf(report.T_target_source, *report.truth);

@@ -31,7 +31,8 @@ struct PairReport {
   int starts = 0;     // refinement starts tried for this pair
   // Degenerate, and kept at the initial guess along the unconstrained directions.
   bool held_at_initial = false;
-  double seconds = 0.0;  // wall time of the registration as the caller saw it
+  bool line_normals_from_planes = false;  // the line rule that ran (as asked, or as chosen)
+  double seconds = 0.0;                   // wall time of the registration as the caller saw it
   // Against a known truth, when there is one.
   std::optional<Eigen::Isometry3d> truth;
 };

@@ -52,7 +52,7 @@ void ApplyRegistrationFlags(RegisterOptions& options) {
   options.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
   options.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);
   options.coarse_wide_search = absl::GetFlag(FLAGS_coarse_wide_search);
-  options.line_normals_from_planes = absl::GetFlag(FLAGS_line_normals_from_planes);
+  options.line_normals_from_planes = ExplicitLineNormalsFlag();
   options.hold_degenerate_at_initial = absl::GetFlag(FLAGS_hold_degenerate_at_initial);
 }
 

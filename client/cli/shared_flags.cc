@@ -6,6 +6,7 @@
 #include <system_error>
 
 #include "absl/flags/flag.h"
+#include "absl/flags/internal/parse.h"
 #include "absl/strings/ascii.h"
 #include "core/registrar/embedded_models.h"
 
@@ -62,9 +63,11 @@ ABSL_FLAG(bool, coarse_wide_search, true,
           "stages look for each cell's partner within two cells (3x3x3 block); false: one cell, "
           "as the finest stage (faster, less accurate under jitter, crops and outliers)");
 ABSL_FLAG(bool, line_normals_from_planes, false,
-          "eval, register, odometry (refining modes): nodes whose points lie along a line (a "
-          "sparse scan's ring arcs) take the normal of the ancestor plane they lie on; for 16- "
-          "and 32-beam scanners (a simulated VLP-16 drifts 1.9-3.5% with it, 6-56% without)");
+          "eval, register, odometry, bench (refining modes): nodes whose points lie along a "
+          "line (a sparse scan's ring arcs) take the normal of the ancestor plane they lie on "
+          "(a simulated VLP-16 drifts 1.9-3.5% with it, 6-56% without); not given: chosen per "
+          "pair, on where most of the finest cells hold a single ring's arc (16- and 32-beam "
+          "scanners), off elsewhere (the HDL-64E's streets, objects)");
 ABSL_FLAG(bool, hold_degenerate_at_initial, true,
           "register (with --initial), odometry (with --constant_velocity): when the geometry is "
           "degenerate (an open road along its length), keep the guess (the previous motion) "
@@ -92,8 +95,17 @@ void ApplyRegistrationFlags(core::RegistrationOptions& options) {
   if (!absl::GetFlag(FLAGS_coarse_wide_search)) {
     core::SearchCoarseStagesAsTheFinest(options.refinement);
   }
-  options.refinement.line_normals_from_planes = absl::GetFlag(FLAGS_line_normals_from_planes);
+  options.refinement.line_normals_from_planes = ExplicitLineNormalsFlag();
   options.hold_degenerate_at_initial = absl::GetFlag(FLAGS_hold_degenerate_at_initial);
+}
+
+// Abseil 20220623 keeps CommandLineFlag::IsSpecifiedOnCommandLine private; the parser's own
+// record of the flags it saw is the same answer (service_flags.cc reads --mode so too).
+std::optional<bool> ExplicitLineNormalsFlag() {
+  if (!absl::flags_internal::WasPresentOnCommandLine("line_normals_from_planes")) {
+    return std::nullopt;
+  }
+  return absl::GetFlag(FLAGS_line_normals_from_planes);
 }
 
 std::optional<core::DisturbanceKind> ParseDisturbanceFlag(const std::string& name) {

@@ -48,8 +48,13 @@ std::optional<core::ObjectSplit> ParseObjectSplitFlag(const std::string& name,
 
 // The registration flags the subcommands share (--passes, --refine_from_initial,
 // --search_scene_start, --rebin_coarse_depths, --joint_finest_stage, --coarse_wide_search,
-// --hold_degenerate_at_initial) set on `options`; its mode and initial guess stay the caller's.
+// --line_normals_from_planes, --hold_degenerate_at_initial) set on `options`; its mode and
+// initial guess stay the caller's.
 void ApplyRegistrationFlags(core::RegistrationOptions& options);
+
+// --line_normals_from_planes when given on the command line; nullopt (the refinement chooses per
+// pair) when not.
+std::optional<bool> ExplicitLineNormalsFlag();
 
 // --model: a weights file, or the name of an embedded model when no file of that name exists;
 // empty: the default embedded model (the Registrar then loads its shipped calibration too).

@@ -48,6 +48,7 @@
 
 #include <array>
 #include <memory>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -172,9 +173,11 @@ struct TreeRefinementOptions {
   // translation error off -> on, suburban / urban / parking / open road (README, *Sparser
   // scanners*): VLP-16 6.11 / 31.8 / 8.18 / 55.6% -> 1.93 / 3.49 / 1.88 / 2.87%; HDL-32E 3.07 /
   // 5.17 / 2.77 / 10.8% -> 1.61 / 2.36 / 1.34 / 1.43%; HDL-64E 0.29 / 0.82 / 1.28 / 3.71% -> 0.35
-  // / 1.07 / 2.90 / 2.11%. The proto's RegisterOptions.line_normals_from_planes, the CLI's
+  // / 1.07 / 2.90 / 2.11%. Unset (the default): chosen for each pair from the two trees, on
+  // where their rings are farther apart than the finest cells (ChooseLineNormalsFromPlanes), the
+  // result says which rule ran. The proto's RegisterOptions.line_normals_from_planes, the CLI's
   // --line_normals_from_planes.
-  bool line_normals_from_planes = false;
+  std::optional<bool> line_normals_from_planes;
   // Geman-McClure kernel on the Mahalanobis distance, w = (c^2 / (c^2 + e^2))^2 with
   // c^2 = robust_scale_cells^2 / (2 covariance_epsilon): a plane-to-plane offset of
   // robust_scale_cells cell edges along the normal gets weight 1/4 at any depth.
@@ -340,12 +343,33 @@ struct TreeRefinementResult {
   int num_degenerate = 0;
   std::vector<DepthStage> stages;  // coarse to fine
   double total_seconds = 0.0;
+  // The line rule that ran (TreeRefinementOptions::line_normals_from_planes, or its choice).
+  bool line_normals_from_planes = false;
 };
 
 // The depths RefineOnTrees visits, {coarsest, finest}, with the options' -1 resolved (finest: the
 // deepest depth both trees hold; coarsest: depth 3, or the finest if shallower).
 std::pair<int, int> StageDepths(const Octree& source, const Octree& target,
                                 const TreeRefinementOptions& options);
+
+// What TreeRefinementOptions::line_normals_from_planes left unset is chosen from: the fraction of
+// a tree's deepest nodes with a shape (min_count_for_covariance points or more) whose points lie
+// along a line (kLineEigenvalueRatio in tree_refinement.cc), over an even stride of at most 2,048
+// nodes. nullopt when fewer than 100 of those have a shape, too few to tell (an object's tree at
+// depth 6: most of its fine nodes hold one or two points and read an ancestor's shape).
+std::optional<double> LineShapedFraction(const Octree& tree, int min_count_for_covariance);
+
+// The line rule for a pair whose trees have these fractions: on when both are known and their mean
+// is at least 0.7, i.e. when most fine cells hold a single ring's arc because the scanner's rings
+// lie farther apart than a cell. Measured on simulated drives at depth 9 (`rpsr data lidar
+// --sensor S`, four frames each of suburban / urban / parking / open road): HDL-64E 0.47-0.50 /
+// 0.38-0.43 / 0.61-0.63 / 0.49-0.76, HDL-32E 0.75-0.83 / 0.71-0.73 / 0.75-0.80 / 0.77-0.83,
+// VLP-16 0.89-0.91 / 0.84-0.87 / 0.86-0.90 / 0.90-0.94; the KITTI-style pairs (HDL-64E) 0.17-0.54
+// (pair means); 2,048-point objects too few. So the 16- and 32-beam scanners get the rule, the
+// HDL-64E's structured scenes, where it costs, do not, and its open roads, where it helps, partly
+// do.
+bool ChooseLineNormalsFromPlanes(std::optional<double> source_fraction,
+                                 std::optional<double> target_fraction);
 
 // The input checks of RefineOnTrees alone (the errors listed below), so that a caller can reject
 // a request before spending time on it.
@@ -396,7 +420,9 @@ class TreeRefinementCache {
 class PreparedRefinementTarget {
  public:
   // Depths from the options' coarsest (StageDepths' rule) to the tree's deepest, for the options'
-  // min_count_for_covariance (the other options do not matter). InvalidArgument: an empty tree, a
+  // min_count_for_covariance and line_normals_from_planes (unset: the choice for a source like the
+  // target, ChooseLineNormalsFromPlanes on its own fraction twice; a pair whose choice differs
+  // builds its own side). The other options do not matter. InvalidArgument: an empty tree, a
   // negative min_count_for_covariance, a coarsest_depth beyond the tree.
   static absl::StatusOr<std::shared_ptr<const PreparedRefinementTarget>> Prepare(
       const Octree& target, const TreeRefinementOptions& options = {});
@@ -410,10 +436,13 @@ class PreparedRefinementTarget {
 
   struct Sides;  // tree_refinement.cc
   const Sides& sides() const { return *sides_; }
+  // LineShapedFraction of the tree for the options it was prepared with.
+  std::optional<double> line_shaped_fraction() const { return line_shaped_fraction_; }
 
  private:
   PreparedRefinementTarget();
   const Octree* tree_ = nullptr;
+  std::optional<double> line_shaped_fraction_;
   std::unique_ptr<const Sides> sides_;
   size_t bytes_ = 0;
 };

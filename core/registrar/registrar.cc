@@ -302,6 +302,7 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
     out.information = r.information;
     out.degenerate_axes = r.degenerate_axes;
     out.num_degenerate = r.num_degenerate;
+    out.line_normals_from_planes = r.line_normals_from_planes;
     const auto confidence_start = Clock::now();
     ConfidenceInputs inputs;
     inputs.result = &out;

@@ -122,6 +122,9 @@ struct RegistrationResult {
   // The pose along the degenerate directions is the caller's initial guess, not a measurement
   // (RegistrationOptions::hold_degenerate_at_initial).
   bool held_at_initial = false;
+  // Whether line-shaped nodes took their ancestor plane's normal (the refinement options' rule, or
+  // its choice for this pair: TreeRefinementResult::line_normals_from_planes).
+  bool line_normals_from_planes = false;
   // The network's estimate before refinement (identity / the initial guess in mode kRefine) and
   // its mean peak score (an input of the confidence).
   Eigen::Isometry3d net_T_target_source = Eigen::Isometry3d::Identity();

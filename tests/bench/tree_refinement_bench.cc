@@ -6,7 +6,8 @@
 // Speed: BM_RefineLidar/depth:D refines a simulated 120k-point urban pair five frames apart
 // (0.5 s of driving, a few metres) from the identity with trees cached to depth D;
 // BM_RefineObject/points:N refines an object pair from the truth perturbed by 10 degrees and
-// 0.07. Accuracy (one pass each, counters): BM_ObjectAccuracy/from_truth_deg:A starts 40
+// 0.07; BM_LineShapedFraction/depth:D is the line rule's choice on one of those trees. Accuracy
+// (one pass each, counters): BM_ObjectAccuracy/from_truth_deg:A starts 40
 // asymmetric object pairs at the truth rotated by A degrees about a random axis and shifted by
 // 0.07; BM_ObjectBasin/max_angle_deg:A starts them at the identity with the paper's protocol
 // (Euler angles each up to A degrees, translations up to 0.5); BM_LidarAccuracy refines pairs
@@ -89,6 +90,21 @@ void BM_RefineLidar(benchmark::State& state) {
   ReportResult(state, last, TruthOf(10, 15));
 }
 BENCHMARK(BM_RefineLidar)->ArgName("depth")->Arg(8)->Arg(9)->Arg(10)->Unit(benchmark::kMillisecond);
+
+// What choosing the line rule costs a tree (TreeRefinementOptions::line_normals_from_planes left
+// unset: LineShapedFraction, once per tree of a pair), against BM_RefineLidar's refinement.
+void BM_LineShapedFraction(benchmark::State& state) {
+  const Octree tree =
+      TreeOf(Thinned(Drive().SimulateFrame(10).cloud, 120'000), static_cast<int>(state.range(0)));
+  const int min_count = TreeRefinementOptions{}.min_count_for_covariance;
+  double fraction = 0.0;
+  for (auto _ : state) {
+    fraction = LineShapedFraction(tree, min_count).value_or(-1.0);
+    benchmark::DoNotOptimize(fraction);
+  }
+  state.counters["line_fraction"] = fraction;
+}
+BENCHMARK(BM_LineShapedFraction)->ArgName("depth")->Arg(9)->Unit(benchmark::kMillisecond);
 
 ObjectPair AsymmetricPair(const PairOptions& options, uint64_t& seed) {
   while (true) {

@@ -300,6 +300,26 @@ TEST_F(RpsrClientTest, DegenerateAnswersHoldTheGuessAlongTheCorridor) {
   EXPECT_FALSE(free->held_at_initial);
 }
 
+// RegisterOptions::line_normals_from_planes reaches the server when given, and the rule that ran
+// comes back; unset, the server chooses it, off for the shipped scan pair (an HDL-64E's: several
+// rings a depth-9 cell).
+TEST_F(RpsrClientTest, LineRuleIsChosenUnlessGivenAndReported) {
+  const SamplePair lidar = LoadSample("lidar");
+  std::unique_ptr<Client> client = Connect();
+  absl::StatusOr<std::unique_ptr<Session>> session = client->CreateSession(TreeDepth(9));
+  ASSERT_TRUE(session.ok()) << session.status();
+  RegisterOptions options;
+  options.mode = "refine";
+  for (std::optional<bool> given :
+       {std::optional<bool>(), std::optional<bool>(true), std::optional<bool>(false)}) {
+    options.line_normals_from_planes = given;
+    absl::StatusOr<RegistrationResult> result =
+        (*session)->Register(lidar.source.points, lidar.target.points, options);
+    ASSERT_TRUE(result.ok()) << result.status();
+    EXPECT_EQ(result->line_normals_from_planes, given.value_or(false));
+  }
+}
+
 TEST(RpsrClientRecoveryTest, EvictedCloudsAreUploadedAgain) {
   const SamplePair object = LoadSample("object");
   server::ServerOptions options = TestServerOptions();

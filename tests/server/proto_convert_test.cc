@@ -1,6 +1,7 @@
 #include "server/proto_convert.h"
 
 #include <cmath>
+#include <optional>
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
@@ -108,15 +109,17 @@ TEST(ProtoConvertTest, CoarseWideSearchIsOnUnlessTurnedOff) {
             defaults.max_correspondence_distance_cells);
 }
 
-TEST(ProtoConvertTest, LineNormalsFromPlanesIsOffUnlessTurnedOn) {
+TEST(ProtoConvertTest, LineNormalsFromPlanesIsChosenUnlessGiven) {
   auto options = OptionsFromProto({});
   ASSERT_TRUE(options.ok());
-  EXPECT_FALSE(options->refinement.line_normals_from_planes);
-  v1::RegisterOptions proto;
-  proto.set_line_normals_from_planes(true);
-  options = OptionsFromProto(proto);
-  ASSERT_TRUE(options.ok());
-  EXPECT_TRUE(options->refinement.line_normals_from_planes);
+  EXPECT_FALSE(options->refinement.line_normals_from_planes.has_value());
+  for (bool given : {true, false}) {
+    v1::RegisterOptions proto;
+    proto.set_line_normals_from_planes(given);
+    options = OptionsFromProto(proto);
+    ASSERT_TRUE(options.ok());
+    EXPECT_EQ(options->refinement.line_normals_from_planes, std::optional<bool>(given));
+  }
 }
 
 TEST(ProtoConvertTest, HoldingDegenerateDirectionsAtTheGuessIsOnUnlessTurnedOff) {
@@ -158,6 +161,7 @@ TEST(ProtoConvertTest, ResultCarriesEverythingTheRegistrarSays) {
   result.degenerate_axes[3] = true;
   result.num_degenerate = 1;
   result.held_at_initial = true;
+  result.line_normals_from_planes = true;
   result.mode = core::RegistrationMode::kRefine;
   result.timings.refine_seconds = 0.004;
   result.start = "searched";
@@ -171,6 +175,7 @@ TEST(ProtoConvertTest, ResultCarriesEverythingTheRegistrarSays) {
   ASSERT_EQ(proto.degenerate_axes_size(), 6);
   EXPECT_TRUE(proto.degenerate_axes(3));
   EXPECT_TRUE(proto.held_at_initial());
+  EXPECT_TRUE(proto.line_normals_from_planes());
   EXPECT_EQ(proto.mode(), "refine");
   EXPECT_EQ(proto.timings().refine_seconds(), 0.004);
   EXPECT_EQ(proto.start(), "searched");

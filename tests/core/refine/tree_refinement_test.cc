@@ -6,8 +6,10 @@
 #include <cmath>
 #include <cstdio>
 #include <functional>
+#include <optional>
 #include <random>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "core/data/object_pairs.h"
@@ -289,6 +291,8 @@ class ConsecutiveScans {
     return frames > 2 ? (sum / (frames - 2)).norm() : 0.0;
   }
 
+  const std::vector<Octree>& trees() const { return trees_; }
+
  private:
   std::vector<Octree> trees_;
   std::vector<Eigen::Isometry3d> poses_;
@@ -323,24 +327,79 @@ TEST(TreeRefinementTest, JointStageCoarserDepthDoesNotPullConsecutiveScans) {
 // sensor). Taking the ground's or the wall's normal from an ancestor, the bias a frame is a
 // fraction of that (here the mean error vector a frame is 328 mm with their own normals and 8 mm
 // with the planes').
-TEST(TreeRefinementTest, LineNodesTakingTheirPlanesNormalDoNotPullSparseScansTogether) {
+// A VLP-16 (`rpsr data lidar --sensor vlp16`) driving a suburban street.
+LidarSequenceOptions Vlp16SuburbanDrive(int frame_count) {
   LidarSequenceOptions options;
   options.style = StreetStyle::kSuburban;
-  options.frame_count = 16;
+  options.frame_count = frame_count;
   options.seed = 11;
   options.sensor.beam_count = 16;
   options.sensor.max_elevation_deg = 15.0;
   options.sensor.min_elevation_deg = -15.0;
   options.sensor.azimuth_steps = 1800;
-  const ConsecutiveScans scans(options);
-  EXPECT_FALSE(TreeRefinementOptions{}.line_normals_from_planes);
+  return options;
+}
+
+TEST(TreeRefinementTest, LineNodesTakingTheirPlanesNormalDoNotPullSparseScansTogether) {
+  const ConsecutiveScans scans(Vlp16SuburbanDrive(16));
+  TreeRefinementOptions own_normals;
+  own_normals.line_normals_from_planes = false;
   TreeRefinementOptions from_planes;
   from_planes.line_normals_from_planes = true;
-  const double own = scans.BiasMm({});
+  const double own = scans.BiasMm(own_normals);
   const double borrowed = scans.BiasMm(from_planes);
   std::printf("mean translation error vector a frame: own normals %.1f mm, planes' %.1f mm\n", own,
               borrowed);
   EXPECT_LT(borrowed, 0.5 * own);
+}
+
+// Left unset, the line rule is chosen from the trees: on for a VLP-16's scans (most of their
+// depth-9 cells hold one ring's arc), off for an HDL-64E's (several rings a cell) and for objects
+// (too few fine nodes with a shape of their own to tell). The choice runs exactly as the rule
+// given explicitly would.
+TEST(TreeRefinementTest, UnsetLineRuleIsChosenFromTheScansRings) {
+  const LidarSequenceOptions vlp16 = Vlp16SuburbanDrive(3);
+  LidarSequenceOptions hdl64 = vlp16;
+  hdl64.sensor = LidarSequenceOptions{}.sensor;
+  ASSERT_EQ(hdl64.sensor.beam_count, 64);
+  const int min_count = TreeRefinementOptions{}.min_count_for_covariance;
+  for (const auto& [scanner, options, expected] :
+       {std::tuple{"VLP-16", vlp16, true}, std::tuple{"HDL-64E", hdl64, false}}) {
+    SCOPED_TRACE(scanner);
+    const ConsecutiveScans scans(options);
+    ASSERT_EQ(scans.trees().size(), 3u);
+    for (const Octree& tree : scans.trees()) {
+      const std::optional<double> fraction = LineShapedFraction(tree, min_count);
+      ASSERT_TRUE(fraction.has_value());
+      std::printf("%s: %.2f of the depth-9 shapes are lines\n", scanner, *fraction);
+      EXPECT_EQ(*fraction >= 0.7, expected);
+    }
+    const Octree& source = scans.trees()[2];
+    const Octree& target = scans.trees()[1];
+    auto chosen = RefineOnTrees(source, target, Eigen::Isometry3d::Identity());
+    TreeRefinementOptions given;
+    given.line_normals_from_planes = expected;
+    auto explicit_rule = RefineOnTrees(source, target, Eigen::Isometry3d::Identity(), given);
+    ASSERT_TRUE(chosen.ok() && explicit_rule.ok());
+    EXPECT_EQ(chosen->line_normals_from_planes, expected);
+    EXPECT_EQ(explicit_rule->line_normals_from_planes, expected);
+    EXPECT_TRUE(chosen->T_target_source.isApprox(explicit_rule->T_target_source, 0.0));
+  }
+
+  PairOptions pair_options;
+  pair_options.num_points = 2048;
+  auto pair = MakeObjectPair(pair_options, 1);
+  ASSERT_TRUE(pair.ok()) << pair.status();
+  const Octree object = RefinementTree(pair->source, 6);
+  EXPECT_FALSE(LineShapedFraction(object, min_count).has_value());
+  auto on_objects = RefineOnTrees(object, RefinementTree(pair->target, 6), pair->T_target_source);
+  ASSERT_TRUE(on_objects.ok());
+  EXPECT_FALSE(on_objects->line_normals_from_planes);
+
+  // Both fractions are needed; their mean decides.
+  EXPECT_FALSE(ChooseLineNormalsFromPlanes(std::nullopt, 0.95));
+  EXPECT_TRUE(ChooseLineNormalsFromPlanes(0.65, 0.76));
+  EXPECT_FALSE(ChooseLineNormalsFromPlanes(0.6, 0.76));
 }
 
 // Points on z = 0 (a square), on two walls and a floor of a corridor along x, on a sphere.
