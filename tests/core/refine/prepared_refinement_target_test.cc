@@ -4,6 +4,7 @@
 #include <atomic>
 #include <random>
 #include <thread>
+#include <tuple>
 #include <vector>
 
 #include "core/data/object_pairs.h"
@@ -144,6 +145,40 @@ TEST(PreparedRefinementTargetTest, SameResultOnALidarPair) {
   // Indexes and shapes of ~20k nodes: more than a shape a node, far less than the points.
   EXPECT_GT((*prepared)->bytes(), target.level(9).size() * 3 * sizeof(double));
   EXPECT_LT((*prepared)->bytes(), size_t{16} << 20);
+}
+
+// The line rule left unset: a VLP-16 scan's prepared target chooses it on from its own line
+// fraction, and a pair of such scans, choosing it too, reads the prepared side; a rule given
+// otherwise builds its own. Same results as without the prepared target either way.
+TEST(PreparedRefinementTargetTest, ChosenLineRuleOnASparseScanReadsThePreparedSide) {
+  LidarSequenceOptions options;
+  options.frame_count = 3;
+  options.seed = 5;
+  options.sensor.beam_count = 16;
+  options.sensor.max_elevation_deg = 15.0;
+  options.sensor.min_elevation_deg = -15.0;
+  options.sensor.azimuth_steps = 1800;
+  auto sequence = LidarSequenceSimulator::Create(options);
+  ASSERT_TRUE(sequence.ok()) << sequence.status();
+  const Octree target = RefinementTree(sequence->SimulateFrame(1).cloud, 9);
+  const Octree source = RefinementTree(sequence->SimulateFrame(2).cloud, 9);
+  auto prepared = PreparedRefinementTarget::Prepare(target);
+  ASSERT_TRUE(prepared.ok()) << prepared.status();
+  ASSERT_TRUE((*prepared)->line_shaped_fraction().has_value());
+  EXPECT_GE(*(*prepared)->line_shaped_fraction(), 0.7);
+  TreeRefinementOptions own_normals;
+  own_normals.line_normals_from_planes = false;
+  for (const auto& [name, refine, reads_prepared] :
+       {std::tuple{"chosen", TreeRefinementOptions{}, true},
+        std::tuple{"given off", own_normals, false}}) {
+    auto plain = RefineOnTrees(source, target, Eigen::Isometry3d::Identity(), refine);
+    TreeRefinementCache cache(*prepared);
+    auto with = RefineOnTrees(source, target, Eigen::Isometry3d::Identity(), refine, cache);
+    ASSERT_TRUE(plain.ok() && with.ok());
+    ExpectSameRefinement(*plain, *with, name);
+    EXPECT_EQ(with->line_normals_from_planes, reads_prepared) << name;
+    EXPECT_EQ(EveryStageReadThePreparedSide(*with), reads_prepared) << name;
+  }
 }
 
 // One prepared target read by several threads at once (it is never written after Prepare): each
