@@ -124,7 +124,7 @@ std::optional<double> LineShapedFraction(const Octree& tree, int min_count_for_c
 
 bool ChooseLineNormalsFromPlanes(std::optional<double> source_fraction,
                                  std::optional<double> target_fraction) {
-  constexpr double kLineShapedMean = 0.7;
+  constexpr double kLineShapedMean = 0.67;
   if (!source_fraction.has_value() || !target_fraction.has_value()) return false;
   return 0.5 * (*source_fraction + *target_fraction) >= kLineShapedMean;
 }

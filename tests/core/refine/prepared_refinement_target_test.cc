@@ -165,7 +165,7 @@ TEST(PreparedRefinementTargetTest, ChosenLineRuleOnASparseScanReadsThePreparedSi
   auto prepared = PreparedRefinementTarget::Prepare(target);
   ASSERT_TRUE(prepared.ok()) << prepared.status();
   ASSERT_TRUE((*prepared)->line_shaped_fraction().has_value());
-  EXPECT_GE(*(*prepared)->line_shaped_fraction(), 0.7);
+  EXPECT_GE(*(*prepared)->line_shaped_fraction(), 0.67);
   TreeRefinementOptions own_normals;
   own_normals.line_normals_from_planes = false;
   for (const auto& [name, refine, reads_prepared] :

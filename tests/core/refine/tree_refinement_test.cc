@@ -372,7 +372,7 @@ TEST(TreeRefinementTest, UnsetLineRuleIsChosenFromTheScansRings) {
       const std::optional<double> fraction = LineShapedFraction(tree, min_count);
       ASSERT_TRUE(fraction.has_value());
       std::printf("%s: %.2f of the depth-9 shapes are lines\n", scanner, *fraction);
-      EXPECT_EQ(*fraction >= 0.7, expected);
+      EXPECT_EQ(*fraction >= 0.67, expected);
     }
     const Octree& source = scans.trees()[2];
     const Octree& target = scans.trees()[1];
@@ -398,8 +398,8 @@ TEST(TreeRefinementTest, UnsetLineRuleIsChosenFromTheScansRings) {
 
   // Both fractions are needed; their mean decides.
   EXPECT_FALSE(ChooseLineNormalsFromPlanes(std::nullopt, 0.95));
-  EXPECT_TRUE(ChooseLineNormalsFromPlanes(0.65, 0.76));
-  EXPECT_FALSE(ChooseLineNormalsFromPlanes(0.6, 0.76));
+  EXPECT_TRUE(ChooseLineNormalsFromPlanes(0.6, 0.76));
+  EXPECT_FALSE(ChooseLineNormalsFromPlanes(0.6, 0.7));
 }
 
 // Points on z = 0 (a square), on two walls and a floor of a corridor along x, on a sphere.
