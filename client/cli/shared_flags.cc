@@ -43,25 +43,28 @@ ABSL_FLAG(int, passes, 0,
           "model's own number for net, 2 for net+refine");
 ABSL_FLAG(int, threads, 1, "LibTorch intra-op threads");
 ABSL_FLAG(bool, refine_from_initial, true,
-          "eval, register, odometry, net+refine: when the answer refined from the network's "
+          "eval, register, odometry, bench, net+refine: when the answer refined from the network's "
           "estimate is below 0.9 confidence, refine from the initial guess (or identity) too and "
           "keep the clearly better answer");
-ABSL_FLAG(bool, search_scene_start, true,
-          "eval, register, odometry, net+refine on scene-scale trees: when the answer is still "
-          "below 0.9 confidence, search a start (turns about z, assumed up; shifts of whole "
-          "cells) and refine from it too");
-ABSL_FLAG(bool, rebin_coarse_depths, true,
-          "eval, register, odometry (refining modes): the refinement's coarse depths compare the "
-          "source re-binned on the target's cells; false: the source tree's own cells (the "
-          "paper's Eq. 2 as written)");
+ABSL_FLAG(
+    bool, search_scene_start, true,
+    "eval, register, odometry, bench, net+refine on scene-scale trees: when the answer is still "
+    "below 0.9 confidence, search a start (turns about z, assumed up; shifts of whole "
+    "cells) and refine from it too");
+ABSL_FLAG(
+    bool, rebin_coarse_depths, true,
+    "eval, register, odometry, bench (refining modes): the refinement's coarse depths compare the "
+    "source re-binned on the target's cells; false: the source tree's own cells (the "
+    "paper's Eq. 2 as written)");
 ABSL_FLAG(bool, joint_finest_stage, true,
-          "eval, register, odometry (refining modes, with --rebin_coarse_depths): the "
+          "eval, register, odometry, bench (refining modes, with --rebin_coarse_depths): the "
           "refinement's finest stage also fits the next coarser depth re-binned on the target's "
           "cells; false: the finest depth alone");
-ABSL_FLAG(bool, coarse_wide_search, true,
-          "eval, register, odometry (refining modes, with --rebin_coarse_depths): the coarse "
-          "stages look for each cell's partner within two cells (3x3x3 block); false: one cell, "
-          "as the finest stage (faster, less accurate under jitter, crops and outliers)");
+ABSL_FLAG(
+    bool, coarse_wide_search, true,
+    "eval, register, odometry, bench (refining modes, with --rebin_coarse_depths): the coarse "
+    "stages look for each cell's partner within two cells (3x3x3 block); false: one cell, "
+    "as the finest stage (faster, less accurate under jitter, crops and outliers)");
 ABSL_FLAG(bool, line_normals_from_planes, false,
           "eval, register, odometry, bench (refining modes): nodes whose points lie along a "
           "line (a sparse scan's ring arcs) take the normal of the ancestor plane they lie on "
