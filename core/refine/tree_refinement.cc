@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cassert>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -78,8 +79,9 @@ struct ShapeRule {
 };
 
 // RefineOnTrees resolves an unset line_normals_from_planes before any side is built, and
-// PreparedRefinementTarget::Prepare its own.
+// PreparedRefinementTarget::Prepare its own; unresolved here would be a bug (read as off).
 ShapeRule ShapeRuleOf(const TreeRefinementOptions& options) {
+  assert(options.line_normals_from_planes.has_value());
   return {options.min_count_for_covariance, options.line_normals_from_planes.value_or(false)};
 }
 

@@ -168,14 +168,15 @@ struct TreeRefinementOptions {
   // ring arc given a normal across the ring pulls consecutive scans together (the ring moves with
   // the sensor). With this on, such a node takes the normal of its nearest ancestor (at most three
   // depths up) that is not a line and contains it (within 60 degrees of its plane): the ground
-  // or the wall the ring lies on. Off by default: it helps sparse scanners a lot and the HDL-64E
-  // on open roads, but costs the HDL-64E's structured scenes. `rpsr odometry --local`, KITTI
-  // translation error off -> on, suburban / urban / parking / open road (README, *Sparser
-  // scanners*): VLP-16 6.11 / 31.8 / 8.18 / 55.6% -> 1.93 / 3.49 / 1.88 / 2.87%; HDL-32E 3.07 /
-  // 5.17 / 2.77 / 10.8% -> 1.61 / 2.36 / 1.34 / 1.43%; HDL-64E 0.29 / 0.82 / 1.28 / 3.71% -> 0.35
-  // / 1.07 / 2.90 / 2.11%. Unset (the default): chosen for each pair from the two trees, on
-  // where their rings are farther apart than the finest cells (ChooseLineNormalsFromPlanes), the
-  // result says which rule ran. The proto's RegisterOptions.line_normals_from_planes, the CLI's
+  // or the wall the ring lies on. It helps sparse scanners a lot and the HDL-64E on open roads,
+  // but costs the HDL-64E's structured scenes, hence chosen per pair when unset (below). `rpsr
+  // odometry --local`, KITTI translation error off -> on, suburban / urban / parking / open road
+  // (README, *Sparser scanners*): VLP-16 6.11 / 31.8 / 8.18 / 55.6% -> 1.93 / 3.49 / 1.88 / 2.87%;
+  // HDL-32E 3.07 / 5.17 / 2.77 / 10.8% -> 1.61 / 2.36 / 1.34 / 1.43%; HDL-64E 0.29 / 0.82 / 1.28
+  // / 3.71% -> 0.35 / 1.07 / 2.90 / 2.11%. Unset (the default): chosen for each pair from the two
+  // trees, on where their rings are farther apart than the finest cells
+  // (ChooseLineNormalsFromPlanes), the result says which rule ran. The proto's
+  // RegisterOptions.line_normals_from_planes, the CLI's
   // --line_normals_from_planes.
   std::optional<bool> line_normals_from_planes;
   // Geman-McClure kernel on the Mahalanobis distance, w = (c^2 / (c^2 + e^2))^2 with
@@ -392,7 +393,8 @@ class TreeRefinementCache {
  public:
   TreeRefinementCache();
   // Reads the target's side from `prepared` when the calls' target is its tree (and the options'
-  // min_count_for_covariance is the one it was prepared with); otherwise prepares it as usual.
+  // min_count_for_covariance and line rule are the ones it was prepared with); otherwise prepares
+  // it as usual.
   explicit TreeRefinementCache(std::shared_ptr<const PreparedRefinementTarget> prepared);
   ~TreeRefinementCache();
   TreeRefinementCache(TreeRefinementCache&&) noexcept;
@@ -414,7 +416,9 @@ class TreeRefinementCache {
 // see TreeRefinementOptions::covariance_epsilon) on first use, published for the calls after it.
 // Without it each refinement builds them for itself (registrar_bench, mode refine, interleaved:
 // 4.48 -> 4.35 ms on 2,048-point objects, 12.4 -> 11.1 ms on 120k-point scans to depth 9).
-// Preparing builds the indexes only (0.02 ms for an object, 0.08 ms for a scan); the shapes are
+// Preparing builds the indexes (0.02 ms for an object, 0.08 ms for a scan) and measures the tree's
+// LineShapedFraction (~0.12 ms for a depth-9 scan, what a refinement would otherwise measure for
+// it); the shapes are
 // computed by the first refinement that matches them, so the first source pays what it would
 // have paid anyway. Results are the same bit for bit. Safe to share across threads (a shape is
 // computed by the one thread that claims it; a thread that finds it being computed computes its own

@@ -17,6 +17,7 @@
 #include <set>
 #include <string>
 #include <thread>
+#include <tuple>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
@@ -24,6 +25,7 @@
 #include "core/data/pair_manifest.h"
 #include "core/data/registration_metrics.h"
 #include "core/io/point_cloud_io.h"
+#include "core/synth/lidar_sequence.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "server/rpsr_server.h"
@@ -301,22 +303,38 @@ TEST_F(RpsrClientTest, DegenerateAnswersHoldTheGuessAlongTheCorridor) {
 }
 
 // RegisterOptions::line_normals_from_planes reaches the server when given, and the rule that ran
-// comes back; unset, the server chooses it, off for the shipped scan pair (an HDL-64E's: several
-// rings a depth-9 cell).
+// comes back; unset, the server chooses it: off for the shipped scan pair (an HDL-64E's: several
+// rings a depth-9 cell), on for two consecutive frames of a simulated VLP-16 (most cells hold one
+// ring's arc).
 TEST_F(RpsrClientTest, LineRuleIsChosenUnlessGivenAndReported) {
-  const SamplePair lidar = LoadSample("lidar");
+  const SamplePair hdl64 = LoadSample("lidar");
+  core::LidarSequenceOptions vlp16_drive;
+  vlp16_drive.frame_count = 2;
+  vlp16_drive.seed = 11;
+  vlp16_drive.sensor.beam_count = 16;
+  vlp16_drive.sensor.max_elevation_deg = 15.0;
+  vlp16_drive.sensor.min_elevation_deg = -15.0;
+  vlp16_drive.sensor.azimuth_steps = 1800;
+  auto vlp16 = core::LidarSequenceSimulator::Create(vlp16_drive);
+  ASSERT_TRUE(vlp16.ok()) << vlp16.status();
+  const core::PointCloud vlp16_target = vlp16->SimulateFrame(0).cloud;
+  const core::PointCloud vlp16_source = vlp16->SimulateFrame(1).cloud;
   std::unique_ptr<Client> client = Connect();
   absl::StatusOr<std::unique_ptr<Session>> session = client->CreateSession(TreeDepth(9));
   ASSERT_TRUE(session.ok()) << session.status();
   RegisterOptions options;
   options.mode = "refine";
-  for (std::optional<bool> given :
-       {std::optional<bool>(), std::optional<bool>(true), std::optional<bool>(false)}) {
-    options.line_normals_from_planes = given;
-    absl::StatusOr<RegistrationResult> result =
-        (*session)->Register(lidar.source.points, lidar.target.points, options);
-    ASSERT_TRUE(result.ok()) << result.status();
-    EXPECT_EQ(result->line_normals_from_planes, given.value_or(false));
+  for (const auto& [scanner, source, target, chosen] :
+       {std::tuple{"HDL-64E", &hdl64.source.points, &hdl64.target.points, false},
+        std::tuple{"VLP-16", &vlp16_source.points, &vlp16_target.points, true}}) {
+    for (std::optional<bool> given :
+         {std::optional<bool>(), std::optional<bool>(true), std::optional<bool>(false)}) {
+      options.line_normals_from_planes = given;
+      absl::StatusOr<RegistrationResult> result = (*session)->Register(*source, *target, options);
+      ASSERT_TRUE(result.ok()) << scanner << ": " << result.status();
+      EXPECT_EQ(result->line_normals_from_planes, given.value_or(chosen))
+          << scanner << ", given " << (given ? (*given ? "true" : "false") : "nothing");
+    }
   }
 }
 
