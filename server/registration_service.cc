@@ -87,6 +87,8 @@ absl::StatusOr<std::unique_ptr<RegistrationBatcher>> MakeRegistrationBatcher(
         if (outcome.result.mode != core::RegistrationMode::kNet) {
           metrics->ObserveRefinement(outcome.result.timings.refine_seconds);
         }
+        metrics->RecordAnswer(outcome.result.valid, outcome.result.held_at_initial,
+                              outcome.result.line_normals_from_planes, outcome.result.confidence);
       }
       outcomes.push_back(std::move(outcome));
     }

@@ -56,6 +56,19 @@ ServiceMetrics::ServiceMetrics() : registry_(std::make_shared<prometheus::Regist
   network_ = histogram("rpsr_network_seconds",
                        "Network time per registered pair (a batch's time divided among its pairs)");
   refinement_ = histogram("rpsr_refinement_seconds", "Tree refinement time per registered pair");
+  registrations_ = &prometheus::BuildCounter()
+                        .Name("rpsr_registrations_total")
+                        .Help(
+                            "Registered pairs by outcome (valid, held, invalid) and line rule (on, "
+                            "off)")
+                        .Register(r);
+  // Finer near 1, where a caller's acceptance threshold usually sits.
+  confidence_ =
+      &prometheus::BuildHistogram()
+           .Name("rpsr_registration_confidence")
+           .Help("Calibrated confidence of the registered pairs' answers")
+           .Register(r)
+           .Add({}, prometheus::Histogram::BucketBoundaries{0.1, 0.3, 0.5, 0.7, 0.9, 0.95, 0.99});
   batch_size_ = &prometheus::BuildHistogram()
                      .Name("rpsr_batch_size")
                      .Help("Registrations per batch run by a worker")
@@ -128,6 +141,17 @@ ServiceMetrics::ServiceMetrics() : registry_(std::make_shared<prometheus::Regist
   for (const char* reason : {"memory_budget", "session_expired", "session_closed", "released"}) {
     evictions_->Add({{"reason", reason}});
   }
+  for (const char* outcome : {"valid", "held", "invalid"}) {
+    for (const char* line_rule : {"on", "off"}) {
+      registrations_->Add({{"outcome", outcome}, {"line_rule", line_rule}});
+    }
+  }
+}
+
+void ServiceMetrics::RecordAnswer(bool valid, bool held, bool line_rule, double confidence) {
+  const char* outcome = valid ? "valid" : held ? "held" : "invalid";
+  registrations_->Add({{"outcome", outcome}, {"line_rule", line_rule ? "on" : "off"}}).Increment();
+  confidence_->Observe(confidence);
 }
 
 void ServiceMetrics::RecordCall(absl::string_view method, absl::string_view code, double seconds) {

@@ -5,6 +5,12 @@
 //   rpsr_queue_wait_seconds                           histogram, time in the batch queue
 //   rpsr_tree_build_seconds                           histogram, decode + tree per cloud
 //   rpsr_network_seconds / rpsr_refinement_seconds    histograms, per registered pair
+//   rpsr_registrations_total{outcome, line_rule}     counter, answers by what they say: outcome
+//                                                     valid, held (invalid, kept at the initial
+//                                                     guess along degenerate directions) or
+//                                                     invalid; line_rule on / off (the
+//                                                     refinement's line_normals_from_planes)
+//   rpsr_registration_confidence                      histogram, the answers' confidence
 //   rpsr_batch_size                                   histogram, pairs per batch
 //   rpsr_queue_depth                                  gauge, registrations waiting
 //   rpsr_cache_hits_total / rpsr_cache_misses_total   counters, cached cloud look-ups
@@ -45,6 +51,9 @@ class ServiceMetrics {
   void ObserveTreeBuild(double seconds) { tree_build_->Observe(seconds); }
   void ObserveNetwork(double seconds) { network_->Observe(seconds); }
   void ObserveRefinement(double seconds) { refinement_->Observe(seconds); }
+  // One registered pair's answer: what an operator watches for a sensor or scene gone bad (a rising
+  // share of invalid or low-confidence answers) and which line rule the refinement ran.
+  void RecordAnswer(bool valid, bool held, bool line_rule, double confidence);
   void ObserveBatch(int size) { batch_size_->Observe(size); }
   void SetQueueDepth(int depth) { queue_depth_->Set(depth); }
   void AddUploadedPoints(double points) { uploaded_points_->Increment(points); }
@@ -68,6 +77,8 @@ class ServiceMetrics {
   prometheus::Histogram* tree_build_;
   prometheus::Histogram* network_;
   prometheus::Histogram* refinement_;
+  prometheus::Family<prometheus::Counter>* registrations_;
+  prometheus::Histogram* confidence_;
   prometheus::Histogram* batch_size_;
   prometheus::Gauge* queue_depth_;
   prometheus::Counter* cache_hits_;

@@ -676,6 +676,15 @@ TEST_F(ServerTest, MetricsEndpointExportsTheSeries) {
   EXPECT_TRUE(MetricValue(text, "rpsr_prepared_target_hits_total").has_value());
   EXPECT_GE(MetricValue(text, "rpsr_prepared_targets").value_or(0), 1);
   EXPECT_GT(MetricValue(text, "rpsr_prepared_target_bytes").value_or(0), 10000);
+  // The Register above: an object pair, valid, the line rule off (too few shapes to choose it).
+  EXPECT_GE(
+      MetricValue(text, "rpsr_registrations_total", {{"outcome", "valid"}, {"line_rule", "off"}})
+          .value_or(0),
+      1);
+  EXPECT_TRUE(
+      MetricValue(text, "rpsr_registrations_total", {{"outcome", "held"}, {"line_rule", "on"}})
+          .has_value());
+  EXPECT_GE(MetricValue(text, "rpsr_registration_confidence_count").value_or(0), 1);
 }
 
 // --- servers of their own ------------------------------------------------------------------
