@@ -436,23 +436,10 @@ class FrameFileWatcher {
 // --sensor's beams, elevations and azimuths (datasheet figures at 10 Hz), --azimuth_steps when
 // given on the command line.
 std::optional<core::LidarSensorOptions> SensorFromFlags() {
-  core::LidarSensorOptions sensor;
-  const std::string name = absl::AsciiStrToLower(absl::GetFlag(FLAGS_sensor));
-  if (name == "hdl32") {
-    sensor.beam_count = 32;
-    sensor.max_elevation_deg = 10.67;
-    sensor.min_elevation_deg = -30.67;
-    sensor.azimuth_steps = 2250;
-  } else if (name == "vlp16") {
-    sensor.beam_count = 16;
-    sensor.max_elevation_deg = 15.0;
-    sensor.min_elevation_deg = -15.0;
-    sensor.azimuth_steps = 1800;
-  } else if (name != "hdl64") {
-    return std::nullopt;
-  }
-  if (absl::flags_internal::WasPresentOnCommandLine("azimuth_steps")) {
-    sensor.azimuth_steps = absl::GetFlag(FLAGS_azimuth_steps);
+  std::optional<core::LidarSensorOptions> sensor =
+      core::LidarSensorPreset(absl::AsciiStrToLower(absl::GetFlag(FLAGS_sensor)));
+  if (sensor && absl::flags_internal::WasPresentOnCommandLine("azimuth_steps")) {
+    sensor->azimuth_steps = absl::GetFlag(FLAGS_azimuth_steps);
   }
   return sensor;
 }

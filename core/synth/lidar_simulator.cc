@@ -29,6 +29,29 @@ bool FinitePositive(float v) { return std::isfinite(v) && v > 0.0f; }
 
 }  // namespace
 
+std::optional<LidarSensorOptions> LidarSensorPreset(std::string_view name) {
+  struct Preset {
+    std::string_view name;
+    int beam_count;
+    double max_elevation_deg;
+    double min_elevation_deg;
+    int azimuth_steps;
+  };
+  static constexpr Preset kPresets[] = {{"hdl32", 32, 10.67, -30.67, 2250},
+                                        {"vlp16", 16, 15.0, -15.0, 1800}};
+  LidarSensorOptions sensor;  // the defaults: hdl64
+  if (name == "hdl64") return sensor;
+  for (const Preset& preset : kPresets) {
+    if (preset.name != name) continue;
+    sensor.beam_count = preset.beam_count;
+    sensor.max_elevation_deg = preset.max_elevation_deg;
+    sensor.min_elevation_deg = preset.min_elevation_deg;
+    sensor.azimuth_steps = preset.azimuth_steps;
+    return sensor;
+  }
+  return std::nullopt;
+}
+
 // The scene in ray-casting form: primitives with precomputed terms, and two uniform xy grids in
 // compressed-row form (cell -> primitive references; cell -> ground zones).
 struct LidarSimulator::SceneIndex {

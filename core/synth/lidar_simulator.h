@@ -20,6 +20,7 @@
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <string_view>
 #include <vector>
 
 #include "Eigen/Core"
@@ -45,6 +46,12 @@ struct LidarSensorOptions {
   // Standard deviation of the noise added to the simulated reflectance (in [0, 1]).
   double intensity_noise_sigma = 0.03;
 };
+
+// The scanners `rpsr data lidar --sensor` simulates, by name: "hdl64" (the defaults above:
+// KITTI's), "hdl32" (32 beams, +10.67 to -30.67 degrees, 2,250 azimuths) or "vlp16" (16 beams,
+// +-15 degrees, 1,800 azimuths): beams, elevations and azimuths from the datasheets at 10 Hz;
+// range, noise and dropout as the defaults. nullopt for any other name.
+std::optional<LidarSensorOptions> LidarSensorPreset(std::string_view name);
 
 // One simulated revolution. `labels` and `beam_indices` run parallel to `cloud.points`;
 // `cloud.intensities` holds a reflectance in [0, 1] (class reflectance, incidence angle, range).

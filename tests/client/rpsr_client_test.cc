@@ -311,10 +311,7 @@ TEST_F(RpsrClientTest, LineRuleIsChosenUnlessGivenAndReported) {
   core::LidarSequenceOptions vlp16_drive;
   vlp16_drive.frame_count = 2;
   vlp16_drive.seed = 11;
-  vlp16_drive.sensor.beam_count = 16;
-  vlp16_drive.sensor.max_elevation_deg = 15.0;
-  vlp16_drive.sensor.min_elevation_deg = -15.0;
-  vlp16_drive.sensor.azimuth_steps = 1800;
+  vlp16_drive.sensor = *core::LidarSensorPreset("vlp16");
   auto vlp16 = core::LidarSequenceSimulator::Create(vlp16_drive);
   ASSERT_TRUE(vlp16.ok()) << vlp16.status();
   const core::PointCloud vlp16_target = vlp16->SimulateFrame(0).cloud;

@@ -154,10 +154,7 @@ TEST(PreparedRefinementTargetTest, ChosenLineRuleOnASparseScanReadsThePreparedSi
   LidarSequenceOptions options;
   options.frame_count = 3;
   options.seed = 5;
-  options.sensor.beam_count = 16;
-  options.sensor.max_elevation_deg = 15.0;
-  options.sensor.min_elevation_deg = -15.0;
-  options.sensor.azimuth_steps = 1800;
+  options.sensor = *LidarSensorPreset("vlp16");
   auto sequence = LidarSequenceSimulator::Create(options);
   ASSERT_TRUE(sequence.ok()) << sequence.status();
   const Octree target = RefinementTree(sequence->SimulateFrame(1).cloud, 9);

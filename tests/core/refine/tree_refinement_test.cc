@@ -333,10 +333,7 @@ LidarSequenceOptions Vlp16SuburbanDrive(int frame_count) {
   options.style = StreetStyle::kSuburban;
   options.frame_count = frame_count;
   options.seed = 11;
-  options.sensor.beam_count = 16;
-  options.sensor.max_elevation_deg = 15.0;
-  options.sensor.min_elevation_deg = -15.0;
-  options.sensor.azimuth_steps = 1800;
+  options.sensor = *LidarSensorPreset("vlp16");
   return options;
 }
 
