@@ -56,12 +56,19 @@ ServiceMetrics::ServiceMetrics() : registry_(std::make_shared<prometheus::Regist
   network_ = histogram("rpsr_network_seconds",
                        "Network time per registered pair (a batch's time divided among its pairs)");
   refinement_ = histogram("rpsr_refinement_seconds", "Tree refinement time per registered pair");
-  registrations_ = &prometheus::BuildCounter()
-                        .Name("rpsr_registrations_total")
-                        .Help(
-                            "Registered pairs by outcome (valid, held, invalid) and line rule (on, "
-                            "off)")
-                        .Register(r);
+  auto& registrations = prometheus::BuildCounter()
+                            .Name("rpsr_registrations_total")
+                            .Help(
+                                "Registered pairs by outcome (valid, held, invalid) and line rule "
+                                "(on, off)")
+                            .Register(r);
+  const char* const outcomes[] = {"valid", "held", "invalid"};
+  for (int outcome = 0; outcome < 3; ++outcome) {
+    for (int line_rule = 0; line_rule < 2; ++line_rule) {
+      answers_[outcome][line_rule] = &registrations.Add(
+          {{"outcome", outcomes[outcome]}, {"line_rule", line_rule == 1 ? "on" : "off"}});
+    }
+  }
   // Finer near 1, where a caller's acceptance threshold usually sits.
   confidence_ =
       &prometheus::BuildHistogram()
@@ -141,16 +148,10 @@ ServiceMetrics::ServiceMetrics() : registry_(std::make_shared<prometheus::Regist
   for (const char* reason : {"memory_budget", "session_expired", "session_closed", "released"}) {
     evictions_->Add({{"reason", reason}});
   }
-  for (const char* outcome : {"valid", "held", "invalid"}) {
-    for (const char* line_rule : {"on", "off"}) {
-      registrations_->Add({{"outcome", outcome}, {"line_rule", line_rule}});
-    }
-  }
 }
 
 void ServiceMetrics::RecordAnswer(bool valid, bool held, bool line_rule, double confidence) {
-  const char* outcome = valid ? "valid" : held ? "held" : "invalid";
-  registrations_->Add({{"outcome", outcome}, {"line_rule", line_rule ? "on" : "off"}}).Increment();
+  answers_[valid ? 0 : held ? 1 : 2][line_rule ? 1 : 0]->Increment();
   confidence_->Observe(confidence);
 }
 

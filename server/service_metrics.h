@@ -77,7 +77,9 @@ class ServiceMetrics {
   prometheus::Histogram* tree_build_;
   prometheus::Histogram* network_;
   prometheus::Histogram* refinement_;
-  prometheus::Family<prometheus::Counter>* registrations_;
+  // rpsr_registrations_total's six series, [valid, held, invalid][line rule off, on]: looked up
+  // once here, not per answer.
+  prometheus::Counter* answers_[3][2];
   prometheus::Histogram* confidence_;
   prometheus::Histogram* batch_size_;
   prometheus::Gauge* queue_depth_;

@@ -22,7 +22,6 @@
 #include <vector>
 
 #include "absl/flags/flag.h"
-#include "absl/flags/internal/parse.h"
 #include "absl/strings/ascii.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
@@ -438,7 +437,7 @@ class FrameFileWatcher {
 std::optional<core::LidarSensorOptions> SensorFromFlags() {
   std::optional<core::LidarSensorOptions> sensor =
       core::LidarSensorPreset(absl::AsciiStrToLower(absl::GetFlag(FLAGS_sensor)));
-  if (sensor && absl::flags_internal::WasPresentOnCommandLine("azimuth_steps")) {
+  if (sensor && GivenOnCommandLine("azimuth_steps")) {
     sensor->azimuth_steps = absl::GetFlag(FLAGS_azimuth_steps);
   }
   return sensor;

@@ -1,7 +1,6 @@
 #include "client/cli/service_flags.h"
 
 #include "absl/flags/flag.h"
-#include "absl/flags/internal/parse.h"
 #include "absl/strings/str_cat.h"
 #include "core/io/file_bytes.h"
 
@@ -24,15 +23,13 @@ ABSL_FLAG(std::string, data, "",
 
 namespace rpsr::client {
 
-// Abseil 20220623 keeps CommandLineFlag::IsSpecifiedOnCommandLine private; the parser's own
-// record of the flags it saw is the same answer.
 std::string ExplicitModeFlag() {
-  if (!absl::flags_internal::WasPresentOnCommandLine("mode")) return "";
+  if (!GivenOnCommandLine("mode")) return "";
   return absl::GetFlag(FLAGS_mode);
 }
 
 int ExplicitTreeDepthFlag() {
-  if (!absl::flags_internal::WasPresentOnCommandLine("tree_depth")) return 0;
+  if (!GivenOnCommandLine("tree_depth")) return 0;
   return absl::GetFlag(FLAGS_tree_depth);
 }
 

@@ -103,11 +103,13 @@ void ApplyRegistrationFlags(core::RegistrationOptions& options) {
 }
 
 // Abseil 20220623 keeps CommandLineFlag::IsSpecifiedOnCommandLine private; the parser's own
-// record of the flags it saw is the same answer (service_flags.cc reads --mode so too).
+// record of the flags it saw is the same answer.
+bool GivenOnCommandLine(const char* name) {
+  return absl::flags_internal::WasPresentOnCommandLine(name);
+}
+
 std::optional<bool> ExplicitLineNormalsFlag() {
-  if (!absl::flags_internal::WasPresentOnCommandLine("line_normals_from_planes")) {
-    return std::nullopt;
-  }
+  if (!GivenOnCommandLine("line_normals_from_planes")) return std::nullopt;
   return absl::GetFlag(FLAGS_line_normals_from_planes);
 }
 

@@ -52,6 +52,10 @@ std::optional<core::ObjectSplit> ParseObjectSplitFlag(const std::string& name,
 // initial guess stay the caller's.
 void ApplyRegistrationFlags(core::RegistrationOptions& options);
 
+// Whether the flag `name` was given on the command line (a subcommand then uses it as given
+// instead of choosing itself).
+bool GivenOnCommandLine(const char* name);
+
 // --line_normals_from_planes when given on the command line; nullopt (the refinement chooses per
 // pair) when not.
 std::optional<bool> ExplicitLineNormalsFlag();

@@ -176,8 +176,7 @@ struct TreeRefinementOptions {
   // / 3.71% -> 0.35 / 1.07 / 2.90 / 2.11%. Unset (the default): chosen for each pair from the two
   // trees, on where their rings are farther apart than the finest cells
   // (ChooseLineNormalsFromPlanes), the result says which rule ran. The proto's
-  // RegisterOptions.line_normals_from_planes, the CLI's
-  // --line_normals_from_planes.
+  // RegisterOptions.line_normals_from_planes, the CLI's --line_normals_from_planes.
   std::optional<bool> line_normals_from_planes;
   // Geman-McClure kernel on the Mahalanobis distance, w = (c^2 / (c^2 + e^2))^2 with
   // c^2 = robust_scale_cells^2 / (2 covariance_epsilon): a plane-to-plane offset of

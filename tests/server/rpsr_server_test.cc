@@ -103,6 +103,16 @@ class ServerTest : public ::testing::Test {
     ASSERT_TRUE(client_->CreateSession(&session_).ok());
   }
 
+  // A short simulated drive of small scans (32 beams, 900 azimuths) for the Track tests.
+  static absl::StatusOr<core::LidarSequenceSimulator> SmallLidarDrive(int frame_count) {
+    core::LidarSequenceOptions options;
+    options.frame_count = frame_count;
+    options.seed = 5;
+    options.sensor.beam_count = 32;
+    options.sensor.azimuth_steps = 900;
+    return core::LidarSequenceSimulator::Create(options);
+  }
+
   // A Track stream, its start written: a new session of depth-8 trees, mode refine, each frame
   // started from the previous motion (what odometry asks for); `options` can add to that.
   std::unique_ptr<grpc::ClientReaderWriter<v1::TrackRequest, v1::TrackResponse>> StartLidarTrack(
@@ -305,12 +315,7 @@ TEST_F(ServerTest, ConcurrentRequestsAreBatchedWithTheSameResults) {
 }
 
 TEST_F(ServerTest, TrackFollowsSimulatedLidarFrames) {
-  core::LidarSequenceOptions options;
-  options.frame_count = 4;
-  options.seed = 5;
-  options.sensor.beam_count = 32;
-  options.sensor.azimuth_steps = 900;
-  auto simulator = core::LidarSequenceSimulator::Create(options);
+  auto simulator = SmallLidarDrive(4);
   ASSERT_TRUE(simulator.ok()) << simulator.status();
 
   grpc::ClientContext context;
@@ -500,12 +505,7 @@ TEST_F(ServerTest, RefusesBadRegistrationOptions) {
 // invalid answer (here a frame of flat ground only, degenerate) is not the next start. In
 // mode refine the answer's net_transform_target_source is the start it was given.
 TEST_F(ServerTest, TrackStartsFromTheLastValidMotion) {
-  core::LidarSequenceOptions options;
-  options.frame_count = 3;
-  options.seed = 5;
-  options.sensor.beam_count = 32;
-  options.sensor.azimuth_steps = 900;
-  auto simulator = core::LidarSequenceSimulator::Create(options);
+  auto simulator = SmallLidarDrive(3);
   ASSERT_TRUE(simulator.ok()) << simulator.status();
   std::vector<std::vector<Eigen::Vector3f>> frames;
   for (int frame = 0; frame < 2; ++frame) {
