@@ -5,6 +5,7 @@
 //
 // Speed: BM_RefineLidar/depth:D refines a simulated 120k-point urban pair five frames apart
 // (0.5 s of driving, a few metres) from the identity with trees cached to depth D;
+// BM_RefineSparseLidar/depth:D the same on a simulated VLP-16 drive (the line rule chosen on);
 // BM_RefineObject/points:N refines an object pair from the truth perturbed by 10 degrees and
 // 0.07; BM_LineShapedFraction/depth:D is the line rule's choice on one of those trees. Accuracy
 // (one pass each, counters): BM_ObjectAccuracy/from_truth_deg:A starts 40
@@ -25,6 +26,7 @@
 #include "core/data/transform_convention.h"
 #include "core/refine/tree_refinement.h"
 #include "core/synth/lidar_sequence.h"
+#include "core/synth/lidar_simulator.h"
 #include "core/synth/shape_families.h"
 #include "tests/bench/bench_clouds.h"
 
@@ -90,6 +92,40 @@ void BM_RefineLidar(benchmark::State& state) {
   ReportResult(state, last, TruthOf(10, 15));
 }
 BENCHMARK(BM_RefineLidar)->ArgName("depth")->Arg(8)->Arg(9)->Arg(10)->Unit(benchmark::kMillisecond);
+
+// A sparse scanner's pair (simulated VLP-16, urban, frames 10 -> 15, every point: ~28k), where
+// the line rule is chosen on and most of the finest nodes are ring arcs whose normals come from
+// their ancestors' planes (ShapeAt).
+const LidarSequenceSimulator& SparseDrive() {
+  static const LidarSequenceSimulator* simulator = [] {
+    LidarSequenceOptions options;
+    options.frame_count = 40;
+    options.seed = 1;
+    options.sensor = *LidarSensorPreset("vlp16");
+    auto created = LidarSequenceSimulator::Create(options);
+    if (!created.ok()) std::abort();
+    return new LidarSequenceSimulator(*std::move(created));
+  }();
+  return *simulator;
+}
+
+void BM_RefineSparseLidar(benchmark::State& state) {
+  const int depth = static_cast<int>(state.range(0));
+  const Octree target = TreeOf(SparseDrive().SimulateFrame(10).cloud, depth);
+  const Octree source = TreeOf(SparseDrive().SimulateFrame(15).cloud, depth);
+  TreeRefinementResult last;
+  for (auto _ : state) {
+    auto result = RefineOnTrees(source, target, Eigen::Isometry3d::Identity());
+    if (!result.ok()) std::abort();
+    last = *std::move(result);
+  }
+  const Eigen::Isometry3d truth =
+      SparseDrive().T_world_lidar()[10].inverse() * SparseDrive().T_world_lidar()[15];
+  ReportResult(state, last, truth);
+  state.counters["line_rule"] = last.line_normals_from_planes;
+  state.counters["points"] = static_cast<double>(source.num_points());
+}
+BENCHMARK(BM_RefineSparseLidar)->ArgName("depth")->Arg(9)->Unit(benchmark::kMillisecond);
 
 // What choosing the line rule costs a tree (TreeRefinementOptions::line_normals_from_planes left
 // unset: LineShapedFraction, once per tree of a pair), against BM_RefineLidar's refinement.
