@@ -7,7 +7,8 @@
 // (0.5 s of driving, a few metres) from the identity with trees cached to depth D;
 // BM_RefineSparseLidar/depth:D the same on a simulated VLP-16 drive (the line rule chosen on);
 // BM_RefineObject/points:N refines an object pair from the truth perturbed by 10 degrees and
-// 0.07; BM_LineShapedFraction/depth:D is the line rule's choice on one of those trees. Accuracy
+// 0.07; BM_LineShapedFraction/depth:D is the line rule's choice on one of those trees;
+// BM_MeanNodeDistance/lidar:L the registrar's closeness of two starts' answers. Accuracy
 // (one pass each, counters): BM_ObjectAccuracy/from_truth_deg:A starts 40
 // asymmetric object pairs at the truth rotated by A degrees about a random axis and shifted by
 // 0.07; BM_ObjectBasin/max_angle_deg:A starts them at the identity with the paper's protocol
@@ -24,6 +25,7 @@
 #include "core/data/object_pairs.h"
 #include "core/data/registration_metrics.h"
 #include "core/data/transform_convention.h"
+#include "core/refine/node_closeness.h"
 #include "core/refine/tree_refinement.h"
 #include "core/synth/lidar_sequence.h"
 #include "core/synth/lidar_simulator.h"
@@ -141,6 +143,38 @@ void BM_LineShapedFraction(benchmark::State& state) {
   state.counters["line_fraction"] = fraction;
 }
 BENCHMARK(BM_LineShapedFraction)->ArgName("depth")->Arg(9)->Unit(benchmark::kMillisecond);
+
+// What telling two equally fitting answers apart costs (MeanNodeDistanceCells, run for each of two
+// starts' answers when they differ): on BM_RefineLidar's depth-9 scan pair and on a 1,024-point
+// object pair at depth 6, at the true pose.
+void BM_MeanNodeDistance(benchmark::State& state) {
+  const bool lidar = state.range(0) != 0;
+  Octree source;
+  Octree target;
+  Eigen::Isometry3d truth;
+  int depth = 0;
+  if (lidar) {
+    depth = 9;
+    target = TreeOf(Thinned(Drive().SimulateFrame(10).cloud, 120'000), depth);
+    source = TreeOf(Thinned(Drive().SimulateFrame(15).cloud, 120'000), depth);
+    truth = TruthOf(10, 15);
+  } else {
+    depth = 6;
+    PairOptions options;
+    auto pair = MakeObjectPair(options, 1);
+    if (!pair.ok()) std::abort();
+    source = TreeOf(pair->source, depth);
+    target = TreeOf(pair->target, depth);
+    truth = pair->T_target_source;
+  }
+  double cells = 0.0;
+  for (auto _ : state) {
+    cells = MeanNodeDistanceCells(source, target, truth, depth);
+    benchmark::DoNotOptimize(cells);
+  }
+  state.counters["mean_cells"] = cells;
+}
+BENCHMARK(BM_MeanNodeDistance)->ArgName("lidar")->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 
 ObjectPair AsymmetricPair(const PairOptions& options, uint64_t& seed) {
   while (true) {

@@ -4,8 +4,10 @@
 // where the shipped object network is off its training distribution, the answer is right.
 #include <vector>
 
+#include "core/data/object_pairs.h"
 #include "core/data/registration_metrics.h"
 #include "core/data/training_pairs.h"
+#include "core/refine/node_closeness.h"
 #include "core/registrar/registrar.h"
 #include "core/synth/lidar_sequence.h"
 #include "core/synth/seeded_random.h"
@@ -63,7 +65,13 @@ TEST(RegistrarSecondStartTest, KeepsTheBetterOfTheNetworksStartAndTheGuess) {
       ++from_guess;
       EXPECT_LT(a->confidence, 0.9) << "a confident first answer is kept, frame " << first;
       EXPECT_TRUE(b->valid);
-      EXPECT_TRUE(!a->valid || b->fitness > a->fitness + 0.01) << "frame " << first;
+      // Clearly better, or as good by fitness with its finest nodes closer to the target's.
+      const int finest = 9;
+      const double a_cells = MeanNodeDistanceCells(source, target, a->T_target_source, finest);
+      const double b_cells = MeanNodeDistanceCells(source, target, b->T_target_source, finest);
+      EXPECT_TRUE(!a->valid || b->fitness > a->fitness + 0.01 ||
+                  (b->fitness >= a->fitness - 0.01 && b_cells < 0.99 * a_cells))
+          << "frame " << first;
     }
     EXPECT_EQ(both->net_T_target_source.matrix(), a->net_T_target_source.matrix());
     const PairError e = ErrorOf(both->T_target_source, truth);
@@ -75,6 +83,44 @@ TEST(RegistrarSecondStartTest, KeepsTheBetterOfTheNetworksStartAndTheGuess) {
   // The object network is off its training distribution on scans: on these frames the second
   // start has to win at least once (1 of 4 when written), or this test no longer covers it.
   EXPECT_GE(from_guess, 1);
+}
+
+// Two starts that fit equally well by fitness: a helix spring of the unseen object study (`rpsr
+// eval --protocol objects --split unseen --count 100`, clean, pair 16), whose network start
+// settles in a twin turned along the screw (11.6 degrees off, fitness 1.000 like the truth's).
+// The refinement from the identity finds the pose; fitness cannot tell the two apart, the finest
+// nodes' distance to the target's can (MeanNodeDistanceCells), and the answer is the closer one.
+TEST(RegistrarSecondStartTest, OfTwoEquallyFittingAnswersTheCloserOneIsKept) {
+  PairOptions options;
+  options.split = ObjectSplit::kM2Unseen;
+  auto pair = MakeObjectPair(options, DeriveSeed(1, 16));
+  ASSERT_TRUE(pair.ok()) << pair.status();
+  const Octree source = TreeOf(pair->source);
+  const Octree target = TreeOf(pair->target);
+  RegistrationOptions network_start;
+  network_start.also_refine_from_initial = false;
+  RegistrationOptions guess_start;
+  guess_start.mode = RegistrationMode::kRefine;
+  auto a = SharedRegistrar().Register(source, target, network_start);
+  auto b = SharedRegistrar().Register(source, target, guess_start);
+  auto both = SharedRegistrar().Register(source, target, RegistrationOptions{});
+  ASSERT_TRUE(a.ok() && b.ok() && both.ok());
+  const PairError twin = ErrorOf(a->T_target_source, pair->T_target_source);
+  const PairError found = ErrorOf(b->T_target_source, pair->T_target_source);
+  std::printf("network start %.2f deg (fitness %.3f), identity start %.2f deg (fitness %.3f)\n",
+              twin.rotation_deg, a->fitness, found.rotation_deg, b->fitness);
+  // The case this test needs: the network's start in the twin, the identity's at the pose, and
+  // neither clearly better by fitness.
+  ASSERT_GT(twin.rotation_deg, 5.0);
+  ASSERT_LT(found.rotation_deg, 2.0);
+  ASSERT_TRUE(a->valid && b->valid);
+  ASSERT_NEAR(a->fitness, b->fitness, 0.01);
+  EXPECT_LT(MeanNodeDistanceCells(source, target, b->T_target_source, 6),
+            0.99 * MeanNodeDistanceCells(source, target, a->T_target_source, 6));
+  EXPECT_EQ(both->start, "initial");
+  EXPECT_EQ(both->starts, 2);
+  EXPECT_TRUE(both->T_target_source.isApprox(b->T_target_source, 1e-9));
+  EXPECT_LT(ErrorOf(both->T_target_source, pair->T_target_source).rotation_deg, 2.0);
 }
 
 // net+refine's third start (RegistrationOptions::search_scene_start) on simulated scans ten

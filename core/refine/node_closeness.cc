@@ -1,0 +1,87 @@
+#include "core/refine/node_closeness.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include "core/tree/morton.h"
+
+namespace rpsr::core {
+
+double MeanNodeDistanceCells(const Octree& source, const Octree& target,
+                             const Eigen::Isometry3d& T_target_source, int depth,
+                             const NodeClosenessOptions& options) {
+  if (depth < 1 || depth > source.max_depth() || depth > target.max_depth()) return -1.0;
+  const Octree::Level& s = source.level(depth);
+  const Octree::Level& t = target.level(depth);
+  const Octree::Level& coarse = target.level(depth - 1);
+  if (s.size() == 0 || t.size() == 0 || options.max_source_nodes == 0) return -1.0;
+  const int64_t cells = int64_t{1} << (depth - 1);
+  const double coarse_edge = 2.0 * target.half_length() / static_cast<double>(cells);
+  const double edge = 0.5 * coarse_edge;
+  // The cap is one cell of depth - 1: every target node within it lies in the 27 cells of depth
+  // - 1 around the one holding the moved node.
+  const double cap = NodeClosenessOptions::kCapCells * edge;
+  const double cap2 = cap * cap;
+  const Eigen::Vector3d origin = target.center() - Eigen::Vector3d::Constant(target.half_length());
+  // The occupied cells of depth - 1: a dense table indexed by Morton code where it is small (an
+  // object's depth 5: 32^3 slots), else a binary search of the level's ascending codes (a scan's
+  // depth 8). The table made an object pair's call 0.9 -> 0.2 ms (tree_refinement_bench,
+  // BM_MeanNodeDistance).
+  constexpr int64_t kDenseSlots = int64_t{1} << 18;
+  std::vector<int32_t> dense;
+  if (cells * cells * cells <= kDenseSlots) {
+    dense.assign(static_cast<size_t>(cells * cells * cells), Octree::kEmpty);
+    for (size_t p = 0; p < coarse.size(); ++p) {
+      dense[static_cast<size_t>(coarse.morton[p])] = static_cast<int32_t>(p);
+    }
+  }
+  auto find_coarse = [&](uint64_t code) -> int32_t {
+    if (!dense.empty()) return dense[static_cast<size_t>(code)];
+    // A level's codes are strictly ascending (bh_tree.h).
+    const auto it = std::lower_bound(coarse.morton.begin(), coarse.morton.end(), code);
+    if (it == coarse.morton.end() || *it != code) return Octree::kEmpty;
+    return static_cast<int32_t>(it - coarse.morton.begin());
+  };
+  const size_t n = s.size();
+  const size_t used = std::min(n, options.max_source_nodes);
+  double sum = 0.0;
+  for (size_t k = 0; k < used; ++k) {
+    const size_t node = k * n / used;  // even stride over the Morton order
+    const Eigen::Vector3d q = T_target_source * s.center_of_mass[node].cast<double>();
+    std::array<int64_t, 3> home;
+    for (int a = 0; a < 3; ++a) {
+      // Clamped so that a node far outside the cube neither overflows nor finds a cell.
+      const double f =
+          std::clamp((q[a] - origin[a]) / coarse_edge, -2.0, static_cast<double>(cells) + 2.0);
+      home[a] = static_cast<int64_t>(std::floor(f));
+    }
+    double best2 = cap2;
+    for (int dz = -1; dz <= 1; ++dz) {
+      for (int dy = -1; dy <= 1; ++dy) {
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int64_t x = home[0] + dx;
+          const int64_t y = home[1] + dy;
+          const int64_t z = home[2] + dz;
+          if (x < 0 || y < 0 || z < 0 || x >= cells || y >= cells || z >= cells) continue;
+          const uint64_t code = EncodeMorton<3>(
+              {static_cast<uint32_t>(x), static_cast<uint32_t>(y), static_cast<uint32_t>(z)});
+          const int32_t found = find_coarse(code);
+          if (found == Octree::kEmpty) continue;
+          const size_t parent = static_cast<size_t>(found);
+          for (int octant = 0; octant < Octree::kChildren; ++octant) {
+            const int32_t j = t.labels[parent * Octree::kChildren + static_cast<size_t>(octant)];
+            if (j == Octree::kEmpty) continue;
+            best2 = std::min(best2, (t.center_of_mass[j].cast<double>() - q).squaredNorm());
+          }
+        }
+      }
+    }
+    sum += std::sqrt(best2);
+  }
+  return sum / static_cast<double>(used) / edge;
+}
+
+}  // namespace rpsr::core

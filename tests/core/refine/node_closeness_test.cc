@@ -1,0 +1,113 @@
+// MeanNodeDistanceCells: the mean capped distance from a moved source's nodes to the target's
+// nearest nodes of one depth, in the target's cells (what the registrar reads to choose between
+// two starts' answers that fit equally well).
+#include "core/refine/node_closeness.h"
+
+#include <cmath>
+
+#include "core/data/transform_convention.h"
+#include "gtest/gtest.h"
+#include "tests/core/refine/refinement_test_geometry.h"
+#include "tests/core/refine/refinement_test_util.h"
+
+namespace rpsr::core {
+namespace {
+
+using testing_util::RefinementTree;
+
+constexpr int kDepth = 6;
+
+// A 5 x 5 x 5 lattice 0.5 apart in [-1, 1]^3: one point a depth-6 cell, every neighbour ~16
+// cells away, so a small shift's nearest target node is the node's own.
+PointCloud Lattice() {
+  PointCloud cloud;
+  for (int i = 0; i < 5; ++i) {
+    for (int j = 0; j < 5; ++j) {
+      for (int k = 0; k < 5; ++k)
+        cloud.points.emplace_back(-1.0f + 0.5f * i, -1.0f + 0.5f * j, -1.0f + 0.5f * k);
+    }
+  }
+  return cloud;
+}
+
+double EdgeOf(const Octree& tree, int depth) {
+  return 2.0 * tree.half_length() / static_cast<double>(1 << depth);
+}
+
+Eigen::Isometry3d Shift(const Eigen::Vector3d& v) {
+  return MakeTransform(Eigen::Matrix3d::Identity(), v);
+}
+
+TEST(NodeClosenessTest, ATreeOnItselfIsAtZero) {
+  const Octree tree = RefinementTree(testing_util::Plane(2000, 1), kDepth);
+  EXPECT_EQ(MeanNodeDistanceCells(tree, tree, Eigen::Isometry3d::Identity(), kDepth), 0.0);
+}
+
+TEST(NodeClosenessTest, AShiftWithinTheCapReadsAsItsLengthInCells) {
+  const Octree tree = RefinementTree(Lattice(), kDepth);
+  const double edge = EdgeOf(tree, kDepth);
+  for (double cells : {0.25, 0.5, 1.0, 1.9}) {
+    const Eigen::Vector3d v = cells * edge * Eigen::Vector3d(1, 2, -2).normalized();
+    EXPECT_NEAR(MeanNodeDistanceCells(tree, tree, Shift(v), kDepth), cells, 1e-5) << cells;
+  }
+}
+
+TEST(NodeClosenessTest, NodesWithoutAPartnerWithinTwoCellsCountTheCap) {
+  const Octree tree = RefinementTree(Lattice(), kDepth);
+  const double edge = EdgeOf(tree, kDepth);
+  // 3 cells from their own node and ~13 from the next: all capped.
+  EXPECT_NEAR(MeanNodeDistanceCells(tree, tree, Shift(Eigen::Vector3d(3.0 * edge, 0, 0)), kDepth),
+              NodeClosenessOptions::kCapCells, 1e-9);
+  // Far outside the target's cube.
+  EXPECT_NEAR(MeanNodeDistanceCells(tree, tree, Shift(Eigen::Vector3d(0, 1e6, 0)), kDepth),
+              NodeClosenessOptions::kCapCells, 1e-9);
+}
+
+TEST(NodeClosenessTest, TheSampleIsAnEvenStrideOverTheSourceNodes) {
+  const Octree tree = RefinementTree(Lattice(), kDepth);
+  const double edge = EdgeOf(tree, kDepth);
+  // Moving only the first node (in Morton order) away: read by a one-node sample, diluted 125
+  // times by the full one.
+  PointCloud moved = Lattice();
+  const Eigen::Vector3f first = tree.level(kDepth).center_of_mass[0];
+  for (Eigen::Vector3f& p : moved.points) {
+    if ((p - first).norm() < 1e-6f) p.x() += static_cast<float>(0.5 * edge);
+  }
+  const Octree source = RefinementTree(moved, kDepth);
+  ASSERT_EQ(source.half_length(), tree.half_length());
+  NodeClosenessOptions one;
+  one.max_source_nodes = 1;
+  EXPECT_NEAR(MeanNodeDistanceCells(source, tree, Eigen::Isometry3d::Identity(), kDepth, one), 0.5,
+              1e-5);
+  EXPECT_NEAR(MeanNodeDistanceCells(source, tree, Eigen::Isometry3d::Identity(), kDepth),
+              0.5 / 125.0, 1e-6);
+}
+
+TEST(NodeClosenessTest, APlateSlidAlongItselfIsFartherThanInPlace) {
+  // Two independent samples of one square plate: slid by four cells along the plate, every node
+  // still lies ON the target's plane (what fitness reads), yet the nodes past the edge lose their
+  // partners and the interior's nearest partners are no closer on average.
+  const Octree target = RefinementTree(testing_util::Plane(1000, 1), kDepth);
+  const Octree source = RefinementTree(testing_util::Plane(1000, 2), kDepth);
+  const double edge = EdgeOf(target, kDepth);
+  const double in_place =
+      MeanNodeDistanceCells(source, target, Eigen::Isometry3d::Identity(), kDepth);
+  const double slid =
+      MeanNodeDistanceCells(source, target, Shift(Eigen::Vector3d(4.0 * edge, 0, 0)), kDepth);
+  EXPECT_GT(in_place, 0.0);
+  EXPECT_GT(slid, 1.02 * in_place);  // 1.031 against 1.061 cells
+}
+
+TEST(NodeClosenessTest, UnmeasurableDepthsAreNegative) {
+  const Octree tree = RefinementTree(Lattice(), kDepth);
+  EXPECT_LT(MeanNodeDistanceCells(tree, tree, Eigen::Isometry3d::Identity(), 0), 0.0);
+  EXPECT_LT(MeanNodeDistanceCells(tree, tree, Eigen::Isometry3d::Identity(), kDepth + 1), 0.0);
+  const Octree shallow = RefinementTree(Lattice(), 3);
+  EXPECT_LT(MeanNodeDistanceCells(tree, shallow, Eigen::Isometry3d::Identity(), kDepth), 0.0);
+  NodeClosenessOptions none;
+  none.max_source_nodes = 0;
+  EXPECT_LT(MeanNodeDistanceCells(tree, tree, Eigen::Isometry3d::Identity(), kDepth, none), 0.0);
+}
+
+}  // namespace
+}  // namespace rpsr::core
