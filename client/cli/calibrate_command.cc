@@ -36,6 +36,9 @@ ABSL_FLAG(int, object_pairs, 4,
           "object pairs per split (m1, seen, unseen) and setting (clean + 4 disturbances x 5 "
           "levels)");
 ABSL_FLAG(int, lidar_pairs, 32, "simulated LiDAR pairs per frame offset (5 and 10)");
+ABSL_FLAG(int, unrelated_pairs, 0,
+          "unrelated pairs of each kind (two random volumes, two objects of different families, "
+          "two scans of different streets), every answer a failure");
 ABSL_FLAG(int, jobs, 2, "pairs registered at once");
 ABSL_FLAG(std::string, samples, "",
           "also write every sample (protocol, setting, mode, errors, confidence, features) to "
@@ -136,6 +139,7 @@ int RunCalibrateCommand(const std::vector<std::string>& /*args*/) {
     return 2;
   }
   if (absl::GetFlag(FLAGS_object_pairs) < 0 || absl::GetFlag(FLAGS_lidar_pairs) < 0 ||
+      absl::GetFlag(FLAGS_unrelated_pairs) < 0 ||
       absl::GetFlag(FLAGS_object_pairs) + absl::GetFlag(FLAGS_lidar_pairs) == 0) {
     std::fprintf(stderr,
                  "rpsr calibrate: --object_pairs and --lidar_pairs must be >= 0, one > 0\n");
@@ -156,6 +160,7 @@ int RunCalibrateCommand(const std::vector<std::string>& /*args*/) {
   options.seed = flag_seed != 0 ? flag_seed : (evaluate ? kEvaluateSeed : kFitSeed);
   options.object_pairs_per_setting = absl::GetFlag(FLAGS_object_pairs);
   options.lidar_pairs_per_offset = absl::GetFlag(FLAGS_lidar_pairs);
+  options.unrelated_pairs_per_kind = absl::GetFlag(FLAGS_unrelated_pairs);
   options.threads = std::max(1, absl::GetFlag(FLAGS_jobs));
   ProgressBar bar("pairs");
   options.progress = [&bar](int done, int total) { bar.Update(done, total, NAN, ""); };
@@ -177,8 +182,12 @@ int RunCalibrateCommand(const std::vector<std::string>& /*args*/) {
   const std::string set_description = absl::StrFormat(
       "pair seed %d: %d object pairs per split (m1, seen, unseen) and setting (clean + noise, "
       "outliers, crop, jitter x 5 levels), %d simulated LiDAR pairs per frame offset (5, 10); "
-      "modes net, net+refine, refine: %d samples (%.0f s)",
+      "%smodes net, net+refine, refine: %d samples (%.0f s)",
       options.seed, options.object_pairs_per_setting, options.lidar_pairs_per_offset,
+      options.unrelated_pairs_per_kind == 0
+          ? std::string()
+          : absl::StrFormat("%d unrelated pairs of each kind (volumes, objects, scans); ",
+                            options.unrelated_pairs_per_kind),
       samples->size(), seconds);
 
   std::vector<double> confidences;
@@ -201,8 +210,11 @@ int RunCalibrateCommand(const std::vector<std::string>& /*args*/) {
     if (!parent.empty()) std::filesystem::create_directories(parent, ec);
     const std::string command = absl::StrFormat(
         "rpsr calibrate --evaluate --output %s --object_pairs %d --lidar_pairs %d --pair_seed "
-        "%d%s%s",
+        "%d%s%s%s",
         output, options.object_pairs_per_setting, options.lidar_pairs_per_offset, options.seed,
+        options.unrelated_pairs_per_kind == 0
+            ? ""
+            : absl::StrCat(" --unrelated_pairs ", options.unrelated_pairs_per_kind),
         absl::GetFlag(FLAGS_model).empty() ? "" : " --model " + absl::GetFlag(FLAGS_model),
         config.confidence_path.empty() ? "" : " --confidence " + config.confidence_path);
     std::ofstream(output + ".csv") << "# " << command << "\n# " << set_description << "\n# "
@@ -227,8 +239,11 @@ int RunCalibrateCommand(const std::vector<std::string>& /*args*/) {
               set_description.c_str());
   PrintReports(reports);
   const std::string command = absl::StrFormat(
-      "rpsr calibrate --output %s --object_pairs %d --lidar_pairs %d --pair_seed %d%s", output,
+      "rpsr calibrate --output %s --object_pairs %d --lidar_pairs %d --pair_seed %d%s%s", output,
       options.object_pairs_per_setting, options.lidar_pairs_per_offset, options.seed,
+      options.unrelated_pairs_per_kind == 0
+          ? ""
+          : absl::StrCat(" --unrelated_pairs ", options.unrelated_pairs_per_kind),
       absl::GetFlag(FLAGS_model).empty() ? "" : " --model " + absl::GetFlag(FLAGS_model));
   const std::string comment =
       absl::StrCat("Fitted by `", command, "`\non ", set_description,

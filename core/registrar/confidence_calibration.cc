@@ -6,6 +6,7 @@
 #include <limits>
 #include <mutex>
 #include <numeric>
+#include <random>
 #include <thread>
 #include <utility>
 
@@ -35,8 +36,11 @@ const char* SplitName(ObjectSplit split) {
 
 // One pair to generate: an object pair (split, disturbance, level, index) or a LiDAR pair (frame
 // offset, index).
+enum class Unrelated { kNo, kVolumes, kObjects, kScans };
+
 struct WorkItem {
   bool lidar = false;
+  Unrelated unrelated = Unrelated::kNo;
   std::string setting;
   uint64_t seed = 0;
   PairOptions object;
@@ -48,6 +52,64 @@ double Sigmoid(double z) {
   if (z >= 0) return 1.0 / (1.0 + std::exp(-z));
   const double e = std::exp(z);
   return e / (1.0 + e);
+}
+
+// Uniform points in a box of random proportions (edges 0.5-2), at a random place near the origin.
+PointCloud RandomVolume(size_t n, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> edge(0.5, 2.0);
+  std::uniform_real_distribution<double> unit(-0.5, 0.5);
+  const Eigen::Vector3d size(edge(rng), edge(rng), edge(rng));
+  const Eigen::Vector3d center(0.3 * unit(rng), 0.3 * unit(rng), 0.3 * unit(rng));
+  PointCloud cloud;
+  cloud.points.reserve(n);
+  for (size_t i = 0; i < n; ++i) {
+    const Eigen::Vector3d p =
+        center + Eigen::Vector3d(unit(rng), unit(rng), unit(rng)).cwiseProduct(size);
+    cloud.points.push_back(p.cast<float>());
+  }
+  return cloud;
+}
+
+// A pair with nothing in common (WorkItem::unrelated); its T_target_source is meaningless.
+absl::StatusOr<RegistrationPair> UnrelatedPair(
+    const WorkItem& item, const std::vector<RegistrationPairGenerator>& lidar_streams) {
+  RegistrationPair pair;
+  switch (item.unrelated) {
+    case Unrelated::kVolumes:
+      pair.source = RandomVolume(item.object.num_points, DeriveSeed(item.seed, 1));
+      pair.target = RandomVolume(item.object.num_points, DeriveSeed(item.seed, 2));
+      return pair;
+    case Unrelated::kObjects: {
+      absl::StatusOr<ObjectPair> a = MakeObjectPair(item.object, DeriveSeed(item.seed, 1));
+      if (!a.ok()) return a.status();
+      // The target from the first later seed whose object is of another family.
+      for (uint64_t k = 2; k < 64; ++k) {
+        absl::StatusOr<ObjectPair> b = MakeObjectPair(item.object, DeriveSeed(item.seed, k));
+        if (!b.ok()) return b.status();
+        if (b->family_index == a->family_index) continue;
+        pair.source = std::move(a->source);
+        pair.target = std::move(b->target);
+        return pair;
+      }
+      return absl::InternalError("no object of another family in 62 draws");
+    }
+    case Unrelated::kScans: {
+      // Pairs 8 apart in a stream come from different sequences (8 pairs a sequence), each
+      // sequence a street of another style or seed.
+      const RegistrationPairGenerator& stream = lidar_streams.front();
+      absl::StatusOr<RegistrationPair> a = stream(item.lidar_index * 2);
+      absl::StatusOr<RegistrationPair> b = stream(item.lidar_index * 2 + 8);
+      if (!a.ok()) return a.status();
+      if (!b.ok()) return b.status();
+      pair.source = std::move(a->source);
+      pair.target = std::move(b->target);
+      return pair;
+    }
+    case Unrelated::kNo:
+      break;
+  }
+  return absl::InternalError("not an unrelated pair");
 }
 
 }  // namespace
@@ -110,6 +172,23 @@ absl::StatusOr<std::vector<CalibrationSample>> CollectCalibrationSamples(
     }
   }
 
+  for (int i = 0; i < options.unrelated_pairs_per_kind; ++i) {
+    for (Unrelated kind : {Unrelated::kVolumes, Unrelated::kObjects, Unrelated::kScans}) {
+      if (kind == Unrelated::kScans && lidar_streams.empty()) continue;
+      WorkItem item;
+      item.unrelated = kind;
+      item.lidar = kind == Unrelated::kScans;
+      item.setting = kind == Unrelated::kVolumes   ? "unrelated/volumes"
+                     : kind == Unrelated::kObjects ? "unrelated/objects"
+                                                   : "unrelated/scans";
+      item.seed = DeriveSeed(options.seed, 5000 + static_cast<uint64_t>(i));
+      item.object.split = ObjectSplit::kM1All;
+      item.object.num_points = i % 2 == 0 ? 1024 : 2048;
+      item.lidar_index = static_cast<uint64_t>(i);
+      items.push_back(item);
+    }
+  }
+
   std::vector<std::vector<CalibrationSample>> per_item(items.size());
   std::vector<absl::Status> errors(items.size());
   std::atomic<size_t> next{0};
@@ -120,7 +199,15 @@ absl::StatusOr<std::vector<CalibrationSample>> CollectCalibrationSamples(
       const WorkItem& item = items[i];
       RegistrationPair pair;
       BarnesHutTreeOptions tree_options;
-      if (item.lidar) {
+      if (item.unrelated != Unrelated::kNo) {
+        absl::StatusOr<RegistrationPair> p = UnrelatedPair(item, lidar_streams);
+        if (!p.ok()) {
+          errors[i] = p.status();
+          continue;
+        }
+        pair = *std::move(p);
+        tree_options.max_depth = item.lidar ? options.lidar_tree_depth : options.object_tree_depth;
+      } else if (item.lidar) {
         absl::StatusOr<RegistrationPair> p = lidar_streams[item.offset_slot](item.lidar_index);
         if (!p.ok()) {
           errors[i] = p.status();
@@ -158,7 +245,9 @@ absl::StatusOr<std::vector<CalibrationSample>> CollectCalibrationSamples(
         }
         const RegistrationResult& r = *results[m];
         CalibrationSample s;
-        s.protocol = item.lidar ? "lidar" : "objects";
+        s.protocol = item.unrelated != Unrelated::kNo ? "unrelated"
+                     : item.lidar                     ? "lidar"
+                                                      : "objects";
         s.setting = item.setting;
         s.mode = r.mode;
         s.valid = r.valid;
@@ -170,6 +259,10 @@ absl::StatusOr<std::vector<CalibrationSample>> CollectCalibrationSamples(
         const PairError e = ErrorOf(r.T_target_source, pair.T_target_source);
         s.rotation_error_deg = e.rotation_deg;
         s.translation_error_rel = e.translation / extent;
+        if (item.unrelated != Unrelated::kNo) {  // no pose is right
+          s.rotation_error_deg = 180.0;
+          s.translation_error_rel = 1.0;
+        }
         per_item[i].push_back(std::move(s));
       }
       const int d = ++done;

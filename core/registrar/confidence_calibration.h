@@ -51,6 +51,11 @@ struct CalibrationSetOptions {
   int lidar_pairs_per_offset = 32;
   std::vector<int> lidar_frame_offsets = {5, 10};
   int lidar_tree_depth = 9;
+  // Unrelated pairs, this many of each kind: two random volumes (uniform points in boxes), two
+  // different objects (families apart), two scans of different streets. No pose aligns them, so
+  // every answer is a failure (protocol "unrelated"): the confidence learns what no match looks
+  // like instead of extrapolating (two random clouds read 0.24 before).
+  int unrelated_pairs_per_kind = 0;
   // Each pair is registered in each of these modes.
   std::vector<RegistrationMode> modes = {RegistrationMode::kNet, RegistrationMode::kNetRefine,
                                          RegistrationMode::kRefine};

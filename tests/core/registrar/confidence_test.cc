@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdio>
 #include <random>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -220,6 +221,40 @@ TEST(ShippedCalibrationTest, ReliableOnASmallSeededSetOfBothProtocols) {
   EXPECT_LT(r.ece, 0.12);
   EXPECT_GT(r.auroc, 0.9);
   EXPECT_GT(success_sum / successes, failure_sum / failures + 0.4);
+}
+
+// Pairs with nothing in common (two random volumes, two objects of different families, two scans
+// of different streets): every answer counts as a failure, and the shipped confidence keeps them
+// low (held-out, `rpsr calibrate --evaluate --unrelated_pairs 32`: mean 0.03, README).
+TEST(ShippedCalibrationTest, UnrelatedPairsAreFailuresAndReadLowConfidence) {
+  CalibrationSetOptions options;
+  options.seed = 2024;
+  options.object_pairs_per_setting = 0;
+  options.lidar_pairs_per_offset = 1;
+  options.lidar_frame_offsets = {5};
+  options.lidar_tree_depth = 8;
+  options.unrelated_pairs_per_kind = 2;
+  options.threads = 2;
+  auto samples = CollectCalibrationSamples(testing_util::SharedRegistrar(), options);
+  ASSERT_TRUE(samples.ok()) << samples.status();
+  ASSERT_EQ(samples->size(), (1u + 2u * 3u) * 3u);
+  double sum = 0.0;
+  int unrelated = 0;
+  std::set<std::string> kinds;
+  for (const CalibrationSample& s : *samples) {
+    if (s.protocol != "unrelated") continue;
+    ++unrelated;
+    kinds.insert(s.setting);
+    EXPECT_TRUE(s.failure()) << s.setting;
+    EXPECT_FALSE(s.success()) << s.setting;
+    sum += s.confidence;
+  }
+  ASSERT_EQ(unrelated, 18);
+  EXPECT_EQ(kinds,
+            (std::set<std::string>{"unrelated/objects", "unrelated/scans", "unrelated/volumes"}));
+  std::printf("unrelated pairs: mean confidence %.3f over %d answers\n", sum / unrelated,
+              unrelated);
+  EXPECT_LT(sum / unrelated, 0.2);
 }
 
 }  // namespace
