@@ -51,6 +51,10 @@ double MeanNodeDistanceCells(const Octree& source, const Octree& target,
   for (size_t k = 0; k < used; ++k) {
     const size_t node = k * n / used;  // even stride over the Morton order
     const Eigen::Vector3d q = T_target_source * s.center_of_mass[node].cast<double>();
+    if (!q.allFinite()) {  // a non-finite pose: no partner (and no undefined integer cast)
+      sum += cap;
+      continue;
+    }
     std::array<int64_t, 3> home;
     for (int a = 0; a < 3; ++a) {
       // Clamped so that a node far outside the cube neither overflows nor finds a cell.

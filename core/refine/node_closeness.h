@@ -35,7 +35,8 @@ struct NodeClosenessOptions {
 // Mean over the source's nodes of `depth` (an even sample) of min(distance from T_target_source *
 // CoM to the nearest target CoM of `depth`, cap), in cell edges of the TARGET's `depth`: 0 when
 // every node sits on a target node, kCapCells when none has a partner within the cap. Negative
-// when it cannot be measured: depth < 1 or beyond either tree, or an empty level.
+// when it cannot be measured: depth < 1 or beyond either tree, an empty level, or
+// max_source_nodes == 0.
 double MeanNodeDistanceCells(const Octree& source, const Octree& target,
                              const Eigen::Isometry3d& T_target_source, int depth,
                              const NodeClosenessOptions& options = {});

@@ -34,10 +34,11 @@ const char* SplitName(ObjectSplit split) {
   return "?";
 }
 
-// One pair to generate: an object pair (split, disturbance, level, index) or a LiDAR pair (frame
-// offset, index).
+// The kinds of unrelated pairs (CalibrationSetOptions::unrelated_pairs_per_kind).
 enum class Unrelated { kNo, kVolumes, kObjects, kScans };
 
+// One pair to generate: an object pair (split, disturbance, level, index), a LiDAR pair (frame
+// offset, index) or an unrelated pair (kind, index).
 struct WorkItem {
   bool lidar = false;
   Unrelated unrelated = Unrelated::kNo;

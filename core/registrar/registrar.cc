@@ -343,8 +343,9 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   result.start = options.mode == RegistrationMode::kRefine ? "initial" : "network";
   result.starts = 1;
   TreeRefinementResult best = *std::move(refined);  // the answer settled so far
-  // A further start: refined, and settled when clearly better than the answer so far.
-  // The answer so far's MeanNodeDistanceCells at the finest depth, measured when first needed.
+  // A further start: refined, and settled when clearly better than the answer so far, or as
+  // good by fitness with its finest nodes closer (kCloserBy). The answer so far's
+  // MeanNodeDistanceCells at the finest depth is measured when first needed.
   const int finest_depth = StageDepths(source, target, refinement).second;
   std::optional<double> best_closeness;
   auto closeness = [&](const TreeRefinementResult& r) {

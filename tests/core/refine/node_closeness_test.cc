@@ -58,6 +58,9 @@ TEST(NodeClosenessTest, NodesWithoutAPartnerWithinTwoCellsCountTheCap) {
   // 3 cells from their own node and ~13 from the next: all capped.
   EXPECT_NEAR(MeanNodeDistanceCells(tree, tree, Shift(Eigen::Vector3d(3.0 * edge, 0, 0)), kDepth),
               NodeClosenessOptions::kCapCells, 1e-9);
+  // A non-finite pose reads the cap too.
+  EXPECT_NEAR(MeanNodeDistanceCells(tree, tree, Shift(Eigen::Vector3d(std::nan(""), 0, 0)), kDepth),
+              NodeClosenessOptions::kCapCells, 1e-9);
   // Far outside the target's cube.
   EXPECT_NEAR(MeanNodeDistanceCells(tree, tree, Shift(Eigen::Vector3d(0, 1e6, 0)), kDepth),
               NodeClosenessOptions::kCapCells, 1e-9);
