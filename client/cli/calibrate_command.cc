@@ -140,11 +140,12 @@ int RunCalibrateCommand(const std::vector<std::string>& /*args*/) {
   }
   if (absl::GetFlag(FLAGS_object_pairs) < 0 || absl::GetFlag(FLAGS_lidar_pairs) < 0 ||
       absl::GetFlag(FLAGS_unrelated_pairs) < 0 ||
-      absl::GetFlag(FLAGS_object_pairs) + absl::GetFlag(FLAGS_lidar_pairs) == 0) {
+      absl::GetFlag(FLAGS_object_pairs) + absl::GetFlag(FLAGS_lidar_pairs) +
+              absl::GetFlag(FLAGS_unrelated_pairs) ==
+          0) {
     std::fprintf(stderr,
                  "rpsr calibrate: --object_pairs, --lidar_pairs and --unrelated_pairs must be "
-                 ">= 0, and --object_pairs or --lidar_pairs > 0 (unrelated scans need "
-                 "--lidar_pairs)\n");
+                 ">= 0, one of them > 0\n");
     return 2;
   }
   core::RegistrarConfig config = RegistrarConfigFromModelFlag(absl::GetFlag(FLAGS_model));

@@ -6,7 +6,6 @@
 #include <limits>
 #include <mutex>
 #include <numeric>
-#include <random>
 #include <thread>
 #include <utility>
 
@@ -57,17 +56,18 @@ double Sigmoid(double z) {
 
 // Uniform points in a box of random proportions (edges 0.5-2), at a random place near the origin.
 PointCloud RandomVolume(size_t n, uint64_t seed) {
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> edge(0.5, 2.0);
-  std::uniform_real_distribution<double> unit(-0.5, 0.5);
-  const Eigen::Vector3d size(edge(rng), edge(rng), edge(rng));
-  const Eigen::Vector3d center(0.3 * unit(rng), 0.3 * unit(rng), 0.3 * unit(rng));
+  SeededRandom random(seed);
+  auto unit = [&random] { return random.Uniform(-0.5, 0.5); };
+  const Eigen::Vector3d size(random.Uniform(0.5, 2.0), random.Uniform(0.5, 2.0),
+                             random.Uniform(0.5, 2.0));
+  const Eigen::Vector3d center(0.3 * unit(), 0.3 * unit(), 0.3 * unit());
   PointCloud cloud;
   cloud.points.reserve(n);
   for (size_t i = 0; i < n; ++i) {
-    const Eigen::Vector3d p =
-        center + Eigen::Vector3d(unit(rng), unit(rng), unit(rng)).cwiseProduct(size);
-    cloud.points.push_back(p.cast<float>());
+    const double x = unit();
+    const double y = unit();
+    const double z = unit();
+    cloud.points.push_back((center + Eigen::Vector3d(x, y, z).cwiseProduct(size)).cast<float>());
   }
   return cloud;
 }

@@ -48,21 +48,32 @@ Octree TreeOf(const PointCloud& cloud, int max_depth) {
 
 using bench::Thinned;
 
+// A 40-frame simulated urban drive (seed 1) seen by `sensor`.
+const LidarSequenceSimulator* NewDrive(const LidarSensorOptions& sensor) {
+  LidarSequenceOptions options;
+  options.frame_count = 40;
+  options.seed = 1;
+  options.sensor = sensor;
+  auto created = LidarSequenceSimulator::Create(options);
+  if (!created.ok()) std::abort();
+  return new LidarSequenceSimulator(*std::move(created));
+}
+
 const LidarSequenceSimulator& Drive() {
   static const LidarSequenceSimulator* simulator = [] {
-    LidarSequenceOptions options;
-    options.frame_count = 40;
-    options.seed = 1;
-    options.sensor.azimuth_steps = 2400;  // ~140k points, thinned to 120k
-    auto created = LidarSequenceSimulator::Create(options);
-    if (!created.ok()) std::abort();
-    return new LidarSequenceSimulator(*std::move(created));
+    LidarSensorOptions sensor;
+    sensor.azimuth_steps = 2400;  // ~140k points, thinned to 120k
+    return NewDrive(sensor);
   }();
   return *simulator;
 }
 
+Eigen::Isometry3d TruthOf(const LidarSequenceSimulator& drive, int target_frame, int source_frame) {
+  return drive.T_world_lidar()[target_frame].inverse() * drive.T_world_lidar()[source_frame];
+}
+
 Eigen::Isometry3d TruthOf(int target_frame, int source_frame) {
-  return Drive().T_world_lidar()[target_frame].inverse() * Drive().T_world_lidar()[source_frame];
+  return TruthOf(Drive(), target_frame, source_frame);
 }
 
 void ReportResult(benchmark::State& state, const TreeRefinementResult& result,
@@ -99,15 +110,7 @@ BENCHMARK(BM_RefineLidar)->ArgName("depth")->Arg(8)->Arg(9)->Arg(10)->Unit(bench
 // the line rule is chosen on and most of the finest nodes are ring arcs whose normals come from
 // their ancestors' planes (ShapeAt).
 const LidarSequenceSimulator& SparseDrive() {
-  static const LidarSequenceSimulator* simulator = [] {
-    LidarSequenceOptions options;
-    options.frame_count = 40;
-    options.seed = 1;
-    options.sensor = *LidarSensorPreset("vlp16");
-    auto created = LidarSequenceSimulator::Create(options);
-    if (!created.ok()) std::abort();
-    return new LidarSequenceSimulator(*std::move(created));
-  }();
+  static const LidarSequenceSimulator* simulator = NewDrive(*LidarSensorPreset("vlp16"));
   return *simulator;
 }
 
@@ -121,8 +124,7 @@ void BM_RefineSparseLidar(benchmark::State& state) {
     if (!result.ok()) std::abort();
     last = *std::move(result);
   }
-  const Eigen::Isometry3d truth =
-      SparseDrive().T_world_lidar()[10].inverse() * SparseDrive().T_world_lidar()[15];
+  const Eigen::Isometry3d truth = TruthOf(SparseDrive(), 10, 15);
   ReportResult(state, last, truth);
   state.counters["line_rule"] = last.line_normals_from_planes;
   state.counters["points"] = static_cast<double>(source.num_points());

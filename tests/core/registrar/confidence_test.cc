@@ -226,7 +226,7 @@ TEST(ShippedCalibrationTest, ReliableOnASmallSeededSetOfBothProtocols) {
 // Pairs with nothing in common (two random volumes, two objects of different families, two scans
 // of different streets): every answer counts as a failure, and the shipped confidence keeps them
 // low on average (held-out, `rpsr calibrate --evaluate --object_pairs 0 --lidar_pairs 8
-// --unrelated_pairs 32`: mean 0.020, tests/bench/results/confidence_heldout_unrelated.csv).
+// --unrelated_pairs 32`: mean 0.019, tests/bench/results/confidence_heldout_unrelated.csv).
 TEST(ShippedCalibrationTest, UnrelatedPairsAreFailuresAndReadLowConfidence) {
   CalibrationSetOptions options;
   options.seed = 2024;
