@@ -171,11 +171,11 @@ struct TreeRefinementOptions {
   // or the wall the ring lies on. It helps sparse scanners a lot and the HDL-64E on open roads,
   // but costs the HDL-64E's structured scenes, hence chosen per pair when unset (below). `rpsr
   // odometry --local`, KITTI translation error off -> on, suburban / urban / parking / open road
-  // (README, *Sparser scanners*): VLP-16 6.11 / 31.8 / 8.18 / 55.6% -> 1.93 / 3.49 / 1.88 / 2.87%;
-  // HDL-32E 3.07 / 5.17 / 2.77 / 10.8% -> 1.61 / 2.36 / 1.34 / 1.43%; HDL-64E 0.29 / 0.82 / 1.28
-  // / 3.71% -> 0.35 / 1.07 / 2.90 / 2.11%. Unset (the default): chosen for each pair from the two
-  // trees, on where their rings are farther apart than the finest cells
-  // (ChooseLineNormalsFromPlanes), the result says which rule ran. The proto's
+  // (docs/odometry-notes.md, *Sparser scanners drift more*): VLP-16 6.11 / 31.8 / 8.18 / 55.6%
+  // -> 1.93 / 3.49 / 1.88 / 2.87%; HDL-32E 3.07 / 5.17 / 2.77 / 10.8% -> 1.61 / 2.36 / 1.34 /
+  // 1.43%; HDL-64E 0.29 / 0.82 / 1.28 / 3.71% -> 0.35 / 1.07 / 2.90 / 2.11%. Unset (the default):
+  // chosen for each pair from the two trees, on where their rings are farther apart than the
+  // finest cells (ChooseLineNormalsFromPlanes), the result says which rule ran. The proto's
   // RegisterOptions.line_normals_from_planes, the CLI's --line_normals_from_planes.
   std::optional<bool> line_normals_from_planes;
   // Geman-McClure kernel on the Mahalanobis distance, w = (c^2 / (c^2 + e^2))^2 with
