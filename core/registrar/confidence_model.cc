@@ -24,10 +24,13 @@ double AngleDeg(const Eigen::Matrix3d& R) {
   return std::acos(c) * kRadToDeg;
 }
 
-// Rotation (deg) and translation (metres) between two transforms.
-std::pair<double, double> Difference(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
-  return {AngleDeg(a.linear().transpose() * b.linear()),
-          (a.translation() - b.translation()).norm()};
+// Rotation (deg) between two transforms, and how far apart they put the source's centre of mass
+// (the clouds' units). Not the difference of their translations: that depends on where the
+// clouds lie from their frame's origin (a cloud 1 km from it moves 17 m under a 1-degree turn),
+// and the features must read the same for a cloud however it is placed.
+std::pair<double, double> Difference(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b,
+                                     const Eigen::Vector3d& centre) {
+  return {AngleDeg(a.linear().transpose() * b.linear()), (a * centre - b * centre).norm()};
 }
 
 double Sigmoid(double z) {
@@ -79,6 +82,7 @@ std::vector<double> ConfidenceFeatureVector(const ConfidenceInputs& in) {
   const RegistrationResult& r = *in.result;
   const TreeRefinementResult& refined = *in.refinement;
   const double extent = std::max(ConfidenceExtent(*in.target), 1e-12);
+  const Eigen::Vector3d centre = in.source->level(0).center_of_mass[0].cast<double>();
   const double fitness_edge =
       2.0 * in.target->half_length() / static_cast<double>(uint64_t{1} << refined.fitness_depth);
   f[kFeatureFitness] = refined.fitness;
@@ -128,11 +132,11 @@ std::vector<double> ConfidenceFeatureVector(const ConfidenceInputs& in) {
   f[kFeatureNetScorePeak] = r.net_score_peak;
   if (in.net_per_pass.size() >= 2) {
     const auto [deg, metres] =
-        Difference(in.net_per_pass[in.net_per_pass.size() - 2], in.net_per_pass.back());
+        Difference(in.net_per_pass[in.net_per_pass.size() - 2], in.net_per_pass.back(), centre);
     f[kFeatureLogNetPassChangeDeg] = std::log10(1.0 + deg);
     f[kFeatureNetPassChangeRel] = metres / extent;
   }
-  const auto [deg, metres] = Difference(in.refine_start, r.T_target_source);
+  const auto [deg, metres] = Difference(in.refine_start, r.T_target_source, centre);
   f[kFeatureLogRefineCorrectionDeg] = std::log10(1.0 + deg);
   f[kFeatureRefineCorrectionRel] = metres / extent;
   f[kFeatureModeNet] = r.mode == RegistrationMode::kNet ? 1.0 : 0.0;

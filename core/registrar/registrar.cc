@@ -91,11 +91,14 @@ bool Closer(double later_cells, double so_far_cells) {
 // 1% of the extent) is kept without trying the initial guess as a second start.
 constexpr double kConfidentEnough = 0.9;
 
-// Two starts closer than this converge to the same result: 0.25 degrees and 0.25% of the
-// target cube's half-length.
-bool NearlyEqual(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b, const Octree& target) {
-  const PairError d = ErrorOf(a, b);
-  return d.rotation_deg < 0.25 && d.translation < 0.0025 * target.half_length();
+// Two starts closer than this converge to the same result: 0.25 degrees, and the source's centre
+// of mass placed within 0.25% of the target cube's half-length (where it is placed, not the
+// translations: those differ with the clouds' distance from their frame's origin).
+bool NearlyEqual(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b, const Octree& source,
+                 const Octree& target) {
+  const Eigen::Vector3d centre = source.level(0).center_of_mass[0].cast<double>();
+  return ErrorOf(a, b).rotation_deg < 0.25 &&
+         (a * centre - b * centre).norm() < 0.0025 * target.half_length();
 }
 
 using Clock = std::chrono::steady_clock;
@@ -359,7 +362,7 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
     bool take = ClearlyBetter(*r, best);
     std::optional<double> r_closeness;
     if (!take && r->valid && best.valid && !ClearlyBetter(best, *r) &&
-        !NearlyEqual(r->T_target_source, best.T_target_source, target)) {
+        !NearlyEqual(r->T_target_source, best.T_target_source, source, target)) {
       if (!best_closeness) best_closeness = closeness(best);
       r_closeness = closeness(*r);
       take = Closer(*r_closeness, *best_closeness);
@@ -376,7 +379,7 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   const bool net_refine = options.mode == RegistrationMode::kNetRefine;
   bool refined_from_initial = false;
   if (net_refine && options.also_refine_from_initial && result.confidence < kConfidentEnough &&
-      !NearlyEqual(from, initial, target)) {
+      !NearlyEqual(from, initial, source, target)) {
     try_start(initial, "initial");
     refined_from_initial = true;
   }
