@@ -52,9 +52,9 @@ enum ConfidenceFeature {
   kFeatureLogLastUpdateCells,      // log10 of the finest depth's last update, in cells
   kFeatureNetScorePeak,            // the network's mean peak score (0 in mode refine)
   kFeatureLogNetPassChangeDeg,     // log10(1 + rotation change of the network's last pass, deg)
-  kFeatureNetPassChangeRel,        // translation change of the last pass / extent
+  kFeatureNetPassChangeRel,        // how far the last pass moved the source's CoM / extent
   kFeatureLogRefineCorrectionDeg,  // log10(1 + rotation from the start of refinement to T, deg)
-  kFeatureRefineCorrectionRel,     // translation from the start of refinement to T / extent
+  kFeatureRefineCorrectionRel,     // how far the refinement moved the source's CoM / extent
   kFeatureModeNet,                 // 1 in mode net
   kFeatureModeRefine,              // 1 in mode refine
   kNumConfidenceFeatures,

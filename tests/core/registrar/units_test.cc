@@ -38,9 +38,11 @@ Eigen::Isometry3d PlacedTruth(const Eigen::Isometry3d& T, double scale,
 
 struct Answer {
   PairError error;  // against the truth, translation divided by the scale
+  // How far from where the truth puts it the answer puts the source's centre of mass, divided by
+  // the scale (unlike the translation error, it does not grow with the distance from the origin).
+  double centre_error = 0.0;
   double confidence = 0.0;
   bool valid = false;
-  RegistrationMode mode = RegistrationMode::kNetRefine;
 };
 
 Answer RegisterPlaced(const ObjectPair& pair, float scale, const Eigen::Vector3f& offset,
@@ -56,6 +58,8 @@ Answer RegisterPlaced(const ObjectPair& pair, float scale, const Eigen::Vector3f
   const Eigen::Isometry3d truth = PlacedTruth(pair.T_target_source, scale, offset.cast<double>());
   a.error = ErrorOf(result->T_target_source, truth);
   a.error.translation /= scale;
+  const Eigen::Vector3d centre = source.level(0).center_of_mass[0].cast<double>();
+  a.centre_error = (result->T_target_source * centre - truth * centre).norm() / scale;
   a.confidence = result->confidence;
   a.valid = result->valid;
   return a;
@@ -93,6 +97,7 @@ TEST(RegistrarUnitsTest, AnswersDoNotDependOnWhereTheCloudsLie) {
                                        RegistrationMode::kNetRefine);
     SCOPED_TRACE(testing::Message() << "seed " << seed);
     EXPECT_NEAR(away.error.rotation_deg, home.error.rotation_deg, 0.05);
+    EXPECT_NEAR(away.centre_error, home.centre_error, 1e-3);
     EXPECT_NEAR(away.confidence, home.confidence, 0.05);
     EXPECT_EQ(away.valid, home.valid);
     if (home.confidence > 0.5) ++confident;
