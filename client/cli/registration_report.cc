@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -23,6 +25,29 @@ std::string JsonNumbers(const double* values, int count) {
 double Diagonal(const core::PointCloud& cloud) {
   const Eigen::AlignedBox3f box = core::BoundsOf(cloud.points);
   return box.isEmpty() ? 0.0 : static_cast<double>(box.sizes().norm());
+}
+
+// The mean number of points in the occupied cells of the cloud's bounding cube at `depth`.
+double MeanPointsPerCell(const core::PointCloud& cloud, int depth) {
+  const Eigen::AlignedBox3f box = core::BoundsOf(cloud.points);
+  if (box.isEmpty()) return 0.0;
+  const Eigen::Vector3d low = box.min().cast<double>();
+  const double edge = std::max(static_cast<double>(box.sizes().maxCoeff()), 1e-30);
+  const double cells = static_cast<double>(uint64_t{1} << depth);
+  std::vector<uint64_t> codes;
+  codes.reserve(cloud.points.size());
+  for (const Eigen::Vector3f& p : cloud.points) {
+    uint64_t code = 0;
+    for (int a = 0; a < 3; ++a) {
+      const double c = std::clamp((p[a] - low[a]) / edge * cells, 0.0, cells - 1.0);
+      code = code * (uint64_t{1} << depth) + static_cast<uint64_t>(c);
+    }
+    codes.push_back(code);
+  }
+  std::sort(codes.begin(), codes.end());
+  const size_t occupied =
+      static_cast<size_t>(std::unique(codes.begin(), codes.end()) - codes.begin());
+  return static_cast<double>(cloud.points.size()) / static_cast<double>(occupied);
 }
 
 }  // namespace
@@ -65,11 +90,14 @@ PairReport ReportOf(const RegistrationResult& result) {
 }
 #endif
 
-bool IsSceneScale(const core::PointCloud& cloud) { return Diagonal(cloud) > kSceneDiagonal; }
+bool IsSceneScale(const core::PointCloud& cloud) {
+  return Diagonal(cloud) > kSceneDiagonal &&
+         MeanPointsPerCell(cloud, kSceneTreeDepth) >= kSceneMinPointsPerCell;
+}
 
 int ChooseTreeDepth(const core::PointCloud& source, const core::PointCloud& target, int requested) {
   if (requested > 0) return requested;
-  return IsSceneScale(source) || IsSceneScale(target) ? 9 : 6;
+  return IsSceneScale(source) || IsSceneScale(target) ? kSceneTreeDepth : 6;
 }
 
 std::string ChooseMode(const core::PointCloud& source, const core::PointCloud& target,

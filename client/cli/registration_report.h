@@ -43,9 +43,15 @@ PairReport ReportOf(const core::RegistrationResult& result, double seconds);
 PairReport ReportOf(const RegistrationResult& result);
 #endif
 
-// Clouds whose bounding box diagonal exceeds this are LiDAR-like scenes (metres), smaller ones
-// objects (normalised into [-1, 1]^3 by the data generators).
+// A scene (a LiDAR scan, in metres) is a cloud whose bounding box diagonal exceeds kSceneDiagonal
+// AND which is dense enough for trees of kSceneTreeDepth: at least kSceneMinPointsPerCell points
+// in its occupied cells of that depth (in its own bounding cube; an HDL-64E scan holds 12-13, a
+// VLP-16's 4-5). The diagonal alone took objects given in millimetres for scenes: depth-9 cells
+// then hold single samples, the finest depth found almost no partners and the registration ended
+// "no overlap" (an object holds about one point a cell there, whatever its units).
 inline constexpr double kSceneDiagonal = 10.0;
+inline constexpr int kSceneTreeDepth = 9;
+inline constexpr double kSceneMinPointsPerCell = 2.0;
 bool IsSceneScale(const core::PointCloud& cloud);
 
 // Tree depth: `requested` when > 0, else 6 for objects (what the network was trained on) and 9

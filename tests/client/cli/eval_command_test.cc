@@ -1,5 +1,6 @@
 // End to end: `rpsr data pairs` writes a manifest, `rpsr eval` registers it with the shipped model
-// and writes per-pair rows and summaries whose numbers agree with each other.
+// and writes per-pair rows and summaries whose numbers agree with each other; `rpsr register` picks
+// an object's tree depth whatever its units.
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -13,6 +14,7 @@
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
 #include "absl/strings/str_split.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
@@ -34,10 +36,12 @@ class EvalCommandTest : public ::testing::Test {
   }
   void TearDown() override { fs::remove_all(dir_); }
 
-  int Run(const std::string& args) {
+  // Runs the CLI with `args`; its stdout goes to `stdout_path` (discarded when empty).
+  int Run(const std::string& args, const std::string& stdout_path = "") {
     const fs::path log = dir_ / "stderr.txt";
-    const std::string command = absl::StrCat("OMP_WAIT_POLICY=PASSIVE ", RPSR_CLI_BINARY, " ", args,
-                                             " 2>", log.string(), " >/dev/null");
+    const std::string command =
+        absl::StrCat("OMP_WAIT_POLICY=PASSIVE ", RPSR_CLI_BINARY, " ", args, " 2>", log.string(),
+                     " >", stdout_path.empty() ? "/dev/null" : stdout_path);
     const int status = std::system(command.c_str());
     stderr_ = Read(log.string());
     return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
@@ -101,6 +105,50 @@ TEST_F(EvalCommandTest, StudyHasTheTwentyOneSettings) {
   std::vector<std::string> summary =
       absl::StrSplit(Read(Path("study.csv.summary.csv")), '\n', absl::SkipEmpty());
   EXPECT_EQ(summary.size(), 1u + 21u);
+}
+
+// An object given in millimetres (a bounding box diagonal of ~3,000) is still an object: the CLI
+// used to read any cloud over 10 units across as a LiDAR scene, built depth-9 trees whose cells
+// hold single samples, and the registration ended "no overlap".
+TEST_F(EvalCommandTest, RegisterTakesAnObjectInMillimetresForAnObject) {
+  ASSERT_EQ(Run(absl::StrCat("data pairs --protocol objects --count 1 --split unseen --seed 5 ",
+                             "--format xyz --output ", Path("pairs"))),
+            0)
+      << stderr_;
+  std::vector<std::string> rows =
+      absl::StrSplit(Read(Path("pairs/manifest.csv")), '\n', absl::SkipEmpty());
+  ASSERT_EQ(rows.size(), 2u);
+  const std::vector<std::string> row = absl::StrSplit(rows[1], ',');
+  ASSERT_EQ(row.size(), 3u);
+  constexpr double kMillimetres = 1000.0;
+  for (const int i : {0, 1}) {  // source and target, every coordinate times 1,000
+    std::ifstream in(Path("pairs/" + row[i]));
+    std::ofstream out(Path(absl::StrCat("mm", i, ".xyz")));
+    double x = 0, y = 0, z = 0;
+    while (in >> x >> y >> z)
+      out << x * kMillimetres << ' ' << y * kMillimetres << ' ' << z * kMillimetres << '\n';
+  }
+  std::vector<std::string> truth = absl::StrSplit(row[2], ' ', absl::SkipEmpty());
+  ASSERT_EQ(truth.size(), 16u);
+  for (const int k : {3, 7, 11}) {  // the translation scales with the clouds
+    double t = 0;
+    ASSERT_TRUE(absl::SimpleAtod(truth[k], &t));
+    truth[k] = absl::StrCat(t * kMillimetres);
+  }
+  ASSERT_EQ(Run(absl::StrCat("register --local --json --truth \"", absl::StrJoin(truth, " "), "\" ",
+                             Path("mm0.xyz"), " ", Path("mm1.xyz")),
+                Path("result.json")),
+            0)
+      << stderr_;
+  const std::string json = Read(Path("result.json"));
+  EXPECT_THAT(json, HasSubstr("\"tree_depth\": 6")) << json;
+  EXPECT_THAT(json, HasSubstr("\"valid\": true")) << json;
+  const size_t at = json.find("\"rotation_error_deg\": ");
+  ASSERT_NE(at, std::string::npos) << json;
+  double rotation_error = 0;
+  ASSERT_TRUE(absl::SimpleAtod(json.substr(at + 22, json.find_first_of(",}", at + 22) - (at + 22)),
+                               &rotation_error));
+  EXPECT_LT(rotation_error, 1.0) << json;
 }
 
 TEST_F(EvalCommandTest, BadInputSaysWhatToFix) {
