@@ -97,11 +97,16 @@ std::vector<double> ConfidenceFeatureVector(const ConfidenceInputs& in) {
   f[kFeatureLogSecondEigenvalue] = std::log10(std::max(refined.normalized_eigenvalues[1], 1e-6));
   // The pose's standard errors as the information matrix predicts them (up to the residuals' true
   // scale, which the regularised covariances only approximate).
+  // The damping that keeps a singular H invertible is relative to its trace with the rotation
+  // rows and columns taken as displacements at the extent (rotation * extent), as the refinement
+  // damps: a plain trace adds radians^-2 to metres^-2, which weighs differently at every scale.
   const Eigen::Matrix<double, 6, 6>& H = refined.information;
-  const double trace = H.trace();
+  const double extent2 = extent * extent;
+  const double trace = H.diagonal().head<3>().sum() / extent2 + H.diagonal().tail<3>().sum();
   if (trace > 0 && H.allFinite()) {
     Eigen::Matrix<double, 6, 6> damped = H;
-    damped.diagonal().array() += 1e-9 * trace;
+    damped.diagonal().head<3>().array() += 1e-9 * trace * extent2;
+    damped.diagonal().tail<3>().array() += 1e-9 * trace;
     const Eigen::Matrix<double, 6, 6> covariance = damped.inverse();
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> rotation(covariance.topLeftCorner<3, 3>());
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> translation(
