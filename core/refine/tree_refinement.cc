@@ -1234,10 +1234,24 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
       const Linearization& lin = outcome.lin;
       if (lin.correspondences < options.min_correspondences) {
         result.T_target_source = MakeIsometry(R, t);
-        result.failure_reason =
-            absl::StrCat("no overlap: ", lin.correspondences, " correspondence(s) at depth ", depth,
-                         " (need ", options.min_correspondences,
-                         "); the clouds do not overlap under the current transform");
+        // Too few correspondences because a cloud has too few cells to give them (a handful of
+        // points, all points on one spot or one line) is not a question of overlap: say which.
+        const size_t source_cells = source.level(depth).size();
+        const size_t target_cells = target.level(depth).size();
+        const size_t fewest = std::min(source_cells, target_cells);
+        if (fewest < static_cast<size_t>(options.min_correspondences)) {
+          result.failure_reason = absl::StrCat(
+              "too little geometry: the ", source_cells <= target_cells ? "source" : "target",
+              "'s points fill ", fewest, " cell(s) at depth ", depth, " (need ",
+              options.min_correspondences,
+              "): too few distinct points, or all on one spot or line; register clouds that "
+              "sample a surface");
+        } else {
+          result.failure_reason =
+              absl::StrCat("no overlap: ", lin.correspondences, " correspondence(s) at depth ",
+                           depth, " (need ", options.min_correspondences,
+                           "); the clouds do not overlap under the current transform");
+        }
         result.total_seconds = SecondsSince(start);
         return result;
       }

@@ -26,6 +26,7 @@ namespace rpsr::core {
 namespace {
 
 using ::testing::HasSubstr;
+using ::testing::Not;
 using testing_util::Corridor;
 using testing_util::ExpectSameRefinement;
 using testing_util::Perturbed;
@@ -445,6 +446,22 @@ TEST(TreeRefinementTest, WellConstrainedObjectIsNotDegenerate) {
   // The information matrix is symmetric positive definite.
   EXPECT_TRUE(result->information.isApprox(result->information.transpose()));
   EXPECT_GT(result->information.ldlt().vectorD().minCoeff(), 0.0);
+}
+
+// A cloud with too few cells to give the correspondences (a few points, one spot, one line) is
+// told apart from clouds that do not overlap: the reason says what to fix.
+TEST(TreeRefinementTest, TooLittleGeometryIsNamedAsSuch) {
+  std::vector<Eigen::Vector3f> line;
+  for (int i = 0; i < 500; ++i) line.emplace_back(0.002f * i, 0.004f * i, 0.0f);
+  PointCloud line_cloud;
+  line_cloud.points = line;
+  const Octree source = RefinementTree(line_cloud, 6);
+  const Octree target = RefinementTree(Sphere(2000, 2), 6);
+  auto result = RefineOnTrees(source, target, Eigen::Isometry3d::Identity());
+  ASSERT_TRUE(result.ok()) << result.status();
+  EXPECT_FALSE(result->valid);
+  EXPECT_THAT(result->failure_reason, HasSubstr("too little geometry: the source's points fill"));
+  EXPECT_THAT(result->failure_reason, Not(HasSubstr("no overlap")));
 }
 
 TEST(TreeRefinementTest, NoOverlapIsInvalidNotAnError) {
