@@ -92,7 +92,7 @@ PairReport ReportOf(const RegistrationResult& result) {
 
 bool IsSceneScale(const core::PointCloud& cloud) {
   return Diagonal(cloud) > kSceneDiagonal &&
-         MeanPointsPerCell(cloud, kSceneTreeDepth) >= kSceneMinPointsPerCell;
+         MeanPointsPerCell(cloud, kSceneTreeDepth - 1) >= kSceneMinPointsPerCell;
 }
 
 int ChooseTreeDepth(const core::PointCloud& source, const core::PointCloud& target, int requested) {

@@ -44,14 +44,16 @@ PairReport ReportOf(const RegistrationResult& result);
 #endif
 
 // A scene (a LiDAR scan, in metres) is a cloud whose bounding box diagonal exceeds kSceneDiagonal
-// AND which is dense enough for trees of kSceneTreeDepth: at least kSceneMinPointsPerCell points
-// in its occupied cells of that depth (in its own bounding cube; an HDL-64E scan holds 12-13, a
-// VLP-16's 4-5). The diagonal alone took objects given in millimetres for scenes: depth-9 cells
-// then hold single samples, the finest depth found almost no partners and the registration ended
-// "no overlap" (an object holds about one point a cell there, whatever its units).
+// AND whose points lie no farther apart than about a cell of kSceneTreeDepth: at least
+// kSceneMinPointsPerCell points in its occupied cells one depth above (of its own bounding cube).
+// Measured on simulated scans: an HDL-64E's hold 32 (13 at 0.1 m voxels, 2.3 at 0.5 m), a VLP-16's
+// 8.7 (2.5 at 0.3 m voxels); an object about 1.0 whatever its units, also with 8,192 points. The
+// diagonal alone took objects given in millimetres for scenes: depth-9 cells then hold single
+// samples several cells apart, the finest depth found almost no partners and the registration
+// ended "no overlap".
 inline constexpr double kSceneDiagonal = 10.0;
 inline constexpr int kSceneTreeDepth = 9;
-inline constexpr double kSceneMinPointsPerCell = 2.0;
+inline constexpr double kSceneMinPointsPerCell = 1.5;
 bool IsSceneScale(const core::PointCloud& cloud);
 
 // Tree depth: `requested` when > 0, else 6 for objects (what the network was trained on) and 9

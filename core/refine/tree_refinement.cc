@@ -974,9 +974,9 @@ void CompleteStageSystem(const std::vector<Correspondence>& corr, CoarserDepth* 
 // scan's translation was damped ~200 times harder than its rotation, an object's about as hard),
 // scans refused more steps at 1e-2 (registrar_bench's 120k-point refine 12.2 -> 15.6 ms); from 1:
 // 14.4 ms there (tests/bench/results/registrar_bench_damping_scale.txt), KITTI-style K1 refine
-// 9.1 ms against the old code's 9.2 in the same session, objects' mean recall over ten settings
-// 0.733 -> 0.734 (four settings moved by one or two pairs), K1 / K2 refine RMSE 0.167 deg / 0.030 m
-// and 0.097 / 0.0082.
+// 9.1 ms against the old binary's 9.2 (`rpsr eval --manifest ... --mode refine`, alternated),
+// objects' mean recall over ten settings 0.733 -> 0.734 (four settings moved by one or two pairs),
+// K1 / K2 refine RMSE 0.167 deg / 0.030 m and 0.097 / 0.0082.
 constexpr double kFirstRefusedDamping = 1.0;
 
 struct StageOutcome {

@@ -1,9 +1,8 @@
 #!/bin/bash
 # Does an answer depend on the clouds' units or on where they lie? 40 unseen object pairs
 # (`rpsr data pairs --protocol objects --split unseen --count 40 --seed 1`), registered as they
-# are, scaled by 1/1024 and by 1024 (exact in floating point), and moved 1,000 units from the
-# origin; trees to depth 6 in every case (the CLI would pick depth 9 for the 1024x clouds by their
-# size). Prints, per placement and mode, rpsr eval's summary row: rotation RMSE / MAE / median
+# are, scaled by 1/1024 and by 1024 (exact in floating point), and moved by 1,000 along each axis;
+# trees to depth 6 in every case (rpsr eval's own default; the object protocol's depth). Prints, per placement and mode, rpsr eval's summary row: rotation RMSE / MAE / median
 # (degrees: comparable across placements), translation RMSE / median (the clouds' units:
 # scaled with them, and for the moved clouds also the rotation error times ~1,700), recall (its
 # absolute thresholds only mean something at unit scale), and ms a pair; then the mean confidence.
