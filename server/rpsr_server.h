@@ -40,10 +40,10 @@ struct BatchingOptions {
   int max_queue = 1024;
   // Concurrent batches, and LibTorch intra-op threads each (DEPS.md: one per worker is best).
   // workers 0: one per hardware thread, so a server uses its machine by default (on this 2-core
-  // machine 16 clients got 1.9x the pairs per second of one worker: docs/service-load-notes.md,
-  // Two workers). That is right for CPU inference, where a batch costs what its pairs cost one by
-  // one; with a GPU, where batches pay, run 1-2 workers: the workers split what is due
-  // (dynamic_batcher.h), so many workers form small batches.
+  // machine 16 clients got 1.9x the pairs per second of one worker:
+  // tests/bench/notes/service-load-notes.md, Two workers). That is right for CPU inference, where a
+  // batch costs what its pairs cost one by one; with a GPU, where batches pay, run 1-2 workers: the
+  // workers split what is due (dynamic_batcher.h), so many workers form small batches.
   int workers = 0;
   int intra_op_threads = 1;
   // Prepared targets kept for cached clouds registered against again (PreparedTargetCache): at

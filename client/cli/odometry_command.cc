@@ -454,7 +454,7 @@ int RunOdometryCommand(const std::vector<std::string>& args) {
           ? " (as --line_normals_from_planes asked)"
           : " (chosen per pair from the scans; --line_normals_from_planes[=false] overrides)");
   // Many degenerate frames on a street usually mean ring arcs read as planes across the rings
-  // (docs/odometry-notes.md, *Sparser scanners drift more*): say what helps.
+  // (tests/bench/notes/odometry-notes.md, *Sparser scanners drift more*): say what helps.
   if (line_normals < pairs && pairs > 0 && 5 * invalid >= pairs) {
     std::printf(
         "hint: %d of %d pairs not valid; for a 16- or 32-beam scanner, or an open road, try "

@@ -171,7 +171,8 @@ struct TreeRefinementOptions {
   // or the wall the ring lies on. It helps sparse scanners a lot and the HDL-64E on open roads,
   // but costs the HDL-64E's structured scenes, hence chosen per pair when unset (below). `rpsr
   // odometry --local`, KITTI translation error off -> on, suburban / urban / parking / open road
-  // (docs/odometry-notes.md, *Sparser scanners drift more*): VLP-16 6.11 / 31.8 / 8.18 / 55.6%
+  // (tests/bench/notes/odometry-notes.md, *Sparser scanners drift more*): VLP-16 6.11 / 31.8 / 8.18
+  // / 55.6%
   // -> 1.93 / 3.49 / 1.88 / 2.87%; HDL-32E 3.07 / 5.17 / 2.77 / 10.8% -> 1.61 / 2.36 / 1.34 /
   // 1.43%; HDL-64E 0.29 / 0.82 / 1.28 / 3.71% -> 0.35 / 1.07 / 2.90 / 2.11%. Unset (the default):
   // chosen for each pair from the two trees, on where their rings are farther apart than the

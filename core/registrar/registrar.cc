@@ -79,7 +79,7 @@ bool ClearlyBetter(const TreeRefinementResult& a, const TreeRefinementResult& b)
 // partner's plane, so a twin slid or twisted along the surface (a helix spring turned along its
 // screw) fits as well by it; the distance to the nearest node does not. Unseen object study
 // (`rpsr eval --protocol objects --split unseen --count 100 --disturbance D --level L`, the ten
-// settings): see docs/refinement-notes.md, *Two starts that fit alike*.
+// settings): see tests/bench/notes/refinement-notes.md, *Two starts that fit alike*.
 constexpr double kCloserBy = 0.01;
 
 bool Closer(double later_cells, double so_far_cells) {

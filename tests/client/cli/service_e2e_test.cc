@@ -262,7 +262,7 @@ TEST_F(ServiceEndToEndTest, OdometryOnASimulatedSequenceMeetsKittiThresholds) {
   EXPECT_EQ(JsonNumber(out_, "invalid_pairs"), 0) << out_;
   EXPECT_EQ(JsonNumber(out_, "held_pairs"), 0) << out_;  // no degenerate frame on this street
   // An HDL-64E's rings lie closer than a depth-9 cell: the line rule is chosen off
-  // (docs/odometry-notes.md, *Sparser scanners drift more*).
+  // (tests/bench/notes/odometry-notes.md, *Sparser scanners drift more*).
   EXPECT_EQ(JsonNumber(out_, "line_normals_from_planes_pairs"), 0) << out_;
   ASSERT_GE(JsonNumber(out_, "segments"), 1) << out_;  // at least one 100 m segment
   // Thresholds with room: measured 0.56 % and 0.008 deg/m on this sequence.
