@@ -103,6 +103,8 @@ RegistrationResult FromProto(const rpsr::v1::RegistrationResult& in) {
   out.num_degenerate = in.num_degenerate();
   out.held_at_initial = in.held_at_initial();
   out.line_normals_from_planes = in.line_normals_from_planes();
+  out.surface_scatter_cells = in.surface_scatter_cells();
+  out.noise_polished = in.noise_polished();
   out.net_T_target_source = FromProto(in.net_transform_target_source());
   out.net_score_peak = in.net_score_peak();
   out.start = in.start();
@@ -126,6 +128,7 @@ void ToProto(const RegisterOptions& in, rpsr::v1::RegisterOptions* out) {
   out->set_rebin_coarse_depths(in.rebin_coarse_depths);
   out->set_joint_finest_stage(in.joint_finest_stage);
   out->set_coarse_wide_search(in.coarse_wide_search);
+  out->set_noise_polish(in.noise_polish);
   if (in.line_normals_from_planes.has_value()) {
     out->set_line_normals_from_planes(*in.line_normals_from_planes);
   }

@@ -158,6 +158,9 @@ struct RegisterOptions {
   // RegisterOptions.line_normals_from_planes): for 16- and 32-beam scanners. Unset: the server
   // chooses per pair (RegistrationResult::line_normals_from_planes says which ran).
   std::optional<bool> line_normals_from_planes;
+  // A last point-to-plane stage one depth coarser when the source's points scatter about the
+  // surface by a sizeable part of the finest cell (proto RegisterOptions.noise_polish).
+  bool noise_polish = true;
   // With initial_T_target_source: a degenerate answer keeps the guess along the unconstrained
   // directions (proto RegisterOptions.hold_degenerate_at_initial; RegistrationResult::
   // held_at_initial).
@@ -196,6 +199,10 @@ struct RegistrationResult {
   bool held_at_initial = false;
   // Whether line-shaped nodes took their ancestor plane's normal (as asked, or as chosen).
   bool line_normals_from_planes = false;
+  // The source's scatter about the target's surface in finest cell edges (negative: not
+  // measured) and whether the noise polish ran (proto RegistrationResult).
+  double surface_scatter_cells = -1.0;
+  bool noise_polished = false;
   Eigen::Isometry3d net_T_target_source = Eigen::Isometry3d::Identity();
   double net_score_peak = 0.0;
   std::string mode;

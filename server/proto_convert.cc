@@ -106,6 +106,9 @@ absl::StatusOr<core::RegistrationOptions> OptionsFromProto(const v1::RegisterOpt
   if (proto.has_coarse_wide_search() && !proto.coarse_wide_search()) {
     core::SearchCoarseStagesAsTheFinest(options.refinement);
   }
+  if (proto.has_noise_polish()) {
+    options.refinement.noise_polish = proto.noise_polish();
+  }
   if (proto.has_line_normals_from_planes()) {
     options.refinement.line_normals_from_planes = proto.line_normals_from_planes();
   }
@@ -134,6 +137,8 @@ void ResultToProto(const core::RegistrationResult& result, v1::RegistrationResul
   for (bool axis : result.degenerate_axes) proto->add_degenerate_axes(axis);
   proto->set_held_at_initial(result.held_at_initial);
   proto->set_line_normals_from_planes(result.line_normals_from_planes);
+  proto->set_surface_scatter_cells(result.surface_scatter_cells);
+  proto->set_noise_polished(result.noise_polished);
   proto->set_num_degenerate(result.num_degenerate);
   TransformToProto(result.net_T_target_source, proto->mutable_net_transform_target_source());
   proto->set_net_score_peak(result.net_score_peak);

@@ -66,6 +66,8 @@ PairReport ReportOf(const core::RegistrationResult& result, double seconds) {
   report.starts = result.starts;
   report.held_at_initial = result.held_at_initial;
   report.line_normals_from_planes = result.line_normals_from_planes;
+  report.surface_scatter_cells = result.surface_scatter_cells;
+  report.noise_polished = result.noise_polished;
   report.seconds = seconds;
   return report;
 }
@@ -85,6 +87,8 @@ PairReport ReportOf(const RegistrationResult& result) {
   report.starts = result.starts;
   report.held_at_initial = result.held_at_initial;
   report.line_normals_from_planes = result.line_normals_from_planes;
+  report.surface_scatter_cells = result.surface_scatter_cells;
+  report.noise_polished = result.noise_polished;
   report.seconds = result.round_trip_seconds;
   return report;
 }
@@ -146,6 +150,14 @@ std::string FormatReportText(const PairReport& report) {
   if (!report.valid && !report.failure_reason.empty()) {
     absl::StrAppend(&out, "reason: ", report.failure_reason, "\n");
   }
+  if (report.noise_polished) {
+    // Worth a line: the clouds are noisier than the finest cells, and the answer's precision is
+    // the coarser depth's.
+    absl::StrAppendFormat(&out,
+                          "noisy surface: the source scatters %.2f finest cells about the "
+                          "target's planes; polished point-to-plane one depth coarser\n",
+                          report.surface_scatter_cells);
+  }
   if (report.truth) {
     const core::PairError error = core::ErrorOf(report.T_target_source, *report.truth);
     absl::StrAppendFormat(&out, "error vs truth: rotation %.3f deg, translation %.4g\n",
@@ -171,6 +183,8 @@ std::string FormatReportJson(const PairReport& report) {
       ", \"start\": ", JsonString(report.start), ", \"starts\": ", report.starts,
       ", \"held_at_initial\": ", report.held_at_initial ? "true" : "false",
       ", \"line_normals_from_planes\": ", report.line_normals_from_planes ? "true" : "false",
+      ", \"surface_scatter_cells\": ", absl::StrFormat("%.6g", report.surface_scatter_cells),
+      ", \"noise_polished\": ", report.noise_polished ? "true" : "false",
       ", \"seconds\": ", absl::StrFormat("%.6f", report.seconds));
   if (report.truth) {
     const core::PairError error = core::ErrorOf(report.T_target_source, *report.truth);

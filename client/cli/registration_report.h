@@ -32,7 +32,9 @@ struct PairReport {
   // Degenerate, and kept at the initial guess along the unconstrained directions.
   bool held_at_initial = false;
   bool line_normals_from_planes = false;  // the line rule that ran (as asked, or as chosen)
-  double seconds = 0.0;                   // wall time of the registration as the caller saw it
+  double surface_scatter_cells = -1.0;    // negative: not measured
+  bool noise_polished = false;
+  double seconds = 0.0;  // wall time of the registration as the caller saw it
   // Against a known truth, when there is one.
   std::optional<Eigen::Isometry3d> truth;
 };

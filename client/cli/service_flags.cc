@@ -48,6 +48,7 @@ void ApplyRegistrationFlags(RegisterOptions& options) {
   options.search_scene_start = absl::GetFlag(FLAGS_search_scene_start);
   options.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
   options.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);
+  options.noise_polish = absl::GetFlag(FLAGS_noise_polish);
   options.coarse_wide_search = absl::GetFlag(FLAGS_coarse_wide_search);
   options.line_normals_from_planes = ExplicitLineNormalsFlag();
   options.hold_degenerate_at_initial = absl::GetFlag(FLAGS_hold_degenerate_at_initial);

@@ -56,6 +56,10 @@ ABSL_FLAG(
     "eval, register, odometry, bench (refining modes): the refinement's coarse depths compare the "
     "source re-binned on the target's cells; false: the source tree's own cells (the "
     "paper's Eq. 2 as written)");
+ABSL_FLAG(bool, noise_polish, true,
+          "eval, register, odometry, bench (refining modes): when the source's points scatter "
+          "about the target's surface by a sizeable part of the finest cell (jitter, a noisy "
+          "scanner), a last point-to-plane stage one depth coarser; false: never");
 ABSL_FLAG(bool, joint_finest_stage, true,
           "eval, register, odometry, bench (refining modes, with --rebin_coarse_depths): the "
           "refinement's finest stage also fits the next coarser depth re-binned on the target's "
@@ -95,6 +99,7 @@ void ApplyRegistrationFlags(core::RegistrationOptions& options) {
   options.search_scene_start = absl::GetFlag(FLAGS_search_scene_start);
   options.refinement.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
   options.refinement.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);
+  options.refinement.noise_polish = absl::GetFlag(FLAGS_noise_polish);
   if (!absl::GetFlag(FLAGS_coarse_wide_search)) {
     core::SearchCoarseStagesAsTheFinest(options.refinement);
   }

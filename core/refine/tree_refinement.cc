@@ -19,6 +19,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
 #include "core/refine/cell_index.h"
+#include "core/refine/noise_polish.h"
 #include "core/tree/morton.h"
 
 namespace rpsr::core {
@@ -1112,19 +1113,16 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
   return RefineOnTrees(source, target, initial_T_target_source, options, cache);
 }
 
-absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const Octree& target,
-                                                   const Eigen::Isometry3d& initial_T_target_source,
-                                                   const TreeRefinementOptions& requested,
-                                                   TreeRefinementCache& cache) {
+namespace {
+
+// The coarse-to-fine stages and the measurements at their end (everything but the noise polish);
+// the inputs are validated and `shared` bound to the trees.
+TreeRefinementResult RefineStages(const Octree& source, const Octree& target,
+                                  const Eigen::Isometry3d& initial_T_target_source,
+                                  const TreeRefinementOptions& requested,
+                                  TreeRefinementCache::Impl& shared) {
   const auto start = std::chrono::steady_clock::now();
-  if (absl::Status status =
-          ValidateTreeRefinement(source, target, initial_T_target_source, requested);
-      !status.ok()) {
-    return status;
-  }
   const auto [coarsest, finest] = StageDepths(source, target, requested);
-  TreeRefinementCache::Impl& shared = *cache.impl_;
-  shared.BindTo(source, target);
   TreeRefinementOptions options = requested;
   options.line_normals_from_planes = shared.LineNormalsFromPlanes(requested);
 
@@ -1308,6 +1306,108 @@ absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const O
   }
   result.total_seconds = SecondsSince(start);
   return result;
+}
+
+// A target level for the noise polish: its cell index from the cache, and per node the normal of
+// its ancestor `normal_depth` (the refinement's shapes there: one eigen-decomposition per ancestor,
+// shared with the stages and the registrar's other starts); no plane where that shape has none.
+PlaneLevel PlaneLevelOf(const Octree& target, int depth, int normal_depth,
+                        const TreeRefinementOptions& options, TreeRefinementCache::Impl& shared,
+                        NodeShape& scratch, AncestorPlanes& ancestors) {
+  PlaneLevel level;
+  level.tree = &target;
+  level.depth = depth;
+  level.index = &shared.Target(depth, options).side->index;
+  const TargetDepth* normals = shared.Target(normal_depth, options).side;
+  level.normal = [&target, depth, normal_depth, normals, &scratch,
+                  &ancestors](int node) -> const Eigen::Vector3d* {
+    for (int d = depth; d > normal_depth; --d) node = target.level(d).parent[node];
+    const NodeShape& shape = normals->Shape(target, node, scratch, ancestors);
+    return shape.planar ? &shape.normal : nullptr;
+  };
+  return level;
+}
+
+// Scatter measurements read this many of the source's finest nodes at most (an even stride), and
+// the target's normals this many depths above the finest (the refinement's shapes there).
+constexpr size_t kScatterMaxNodes = 2048;
+constexpr int kScatterNormalDepthsUp = 2;
+
+// The noise polish (TreeRefinementOptions::noise_polish) after the stages ended at
+// result.T_target_source: measures the scatter and, at or above the threshold, polishes and
+// measures the result again at the polished pose.
+TreeRefinementResult NoisePolish(const Octree& source, const Octree& target,
+                                 const TreeRefinementOptions& options,
+                                 TreeRefinementCache::Impl& shared, TreeRefinementResult result) {
+  const auto start = std::chrono::steady_clock::now();
+  const auto [coarsest, finest] = StageDepths(source, target, options);
+  const int depth = finest - 1;
+  if (depth < coarsest || finest - kScatterNormalDepthsUp < 0) return result;
+  TreeRefinementOptions shapes = options;  // the shape rule the stages ran with
+  shapes.line_normals_from_planes = result.line_normals_from_planes;
+  NodeShape scratch;
+  AncestorPlanes ancestors;
+  const PlaneLevel finest_planes = PlaneLevelOf(target, finest, finest - kScatterNormalDepthsUp,
+                                                shapes, shared, scratch, ancestors);
+  result.surface_scatter_cells = MedianSurfaceScatterCells(
+      source, finest, finest_planes, result.T_target_source, kScatterMaxNodes);
+  if (result.surface_scatter_cells < options.noise_polish_min_scatter_cells) return result;
+  // The polish's planes: normals from the 3x3x3 block of cells centred on each node (a
+  // grid-aligned ancestor's plane is off-centre for most of its nodes).
+  PlaneLevel planes;
+  planes.tree = &target;
+  planes.depth = depth;
+  planes.index = &shared.Target(depth, shapes).side->index;
+  BlockNormals normals(target, depth, *planes.index);
+  planes.normal = [&normals](int node) { return normals.Of(node); };
+  const PlanePolishResult polished =
+      PolishPointToPlane(source, depth, planes, result.T_target_source);
+  if (polished.iterations == 0) return result;
+  DepthStage stage;
+  stage.depth = depth;
+  stage.cell_edge = EdgeOf(target, depth);
+  stage.source_nodes = static_cast<int>(source.level(depth).size());
+  stage.correspondences = polished.correspondences;
+  stage.iterations = polished.iterations;
+  stage.converged = polished.converged;
+  stage.last_update_rotation_rad = polished.last_update_rotation_rad;
+  stage.last_update_translation = polished.last_update_translation;
+  stage.noise_polish = true;
+  // Everything the result reports about the pose, measured again where the polish left it (as a
+  // refinement ending there would report it); what the run did stays the run's.
+  TreeRefinementOptions measure = shapes;
+  measure.evaluate_only = true;
+  TreeRefinementResult measured =
+      RefineStages(source, target, polished.T_target_source, measure, shared);
+  measured.T_target_source = polished.T_target_source;
+  measured.converged = result.converged && polished.converged;
+  measured.iterations = result.iterations + polished.iterations;
+  measured.stages = std::move(result.stages);
+  stage.seconds = SecondsSince(start);
+  measured.stages.push_back(stage);
+  measured.total_seconds = result.total_seconds + stage.seconds;
+  measured.surface_scatter_cells = result.surface_scatter_cells;
+  measured.noise_polished = true;
+  return measured;
+}
+
+}  // namespace
+
+absl::StatusOr<TreeRefinementResult> RefineOnTrees(const Octree& source, const Octree& target,
+                                                   const Eigen::Isometry3d& initial_T_target_source,
+                                                   const TreeRefinementOptions& requested,
+                                                   TreeRefinementCache& cache) {
+  if (absl::Status status =
+          ValidateTreeRefinement(source, target, initial_T_target_source, requested);
+      !status.ok()) {
+    return status;
+  }
+  TreeRefinementCache::Impl& shared = *cache.impl_;
+  shared.BindTo(source, target);
+  TreeRefinementResult result =
+      RefineStages(source, target, initial_T_target_source, requested, shared);
+  if (!requested.noise_polish || requested.evaluate_only || !result.valid) return result;
+  return NoisePolish(source, target, requested, shared, std::move(result));
 }
 
 }  // namespace rpsr::core

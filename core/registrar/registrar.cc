@@ -322,6 +322,8 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
     out.degenerate_axes = r.degenerate_axes;
     out.num_degenerate = r.num_degenerate;
     out.line_normals_from_planes = r.line_normals_from_planes;
+    out.surface_scatter_cells = r.surface_scatter_cells;
+    out.noise_polished = r.noise_polished;
     const auto confidence_start = Clock::now();
     ConfidenceInputs inputs;
     inputs.result = &out;

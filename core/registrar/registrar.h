@@ -125,6 +125,11 @@ struct RegistrationResult {
   // Whether line-shaped nodes took their ancestor plane's normal (the refinement options' rule, or
   // its choice for this pair: TreeRefinementResult::line_normals_from_planes).
   bool line_normals_from_planes = false;
+  // The refinement's measure of the source's scatter about the target's surface, in finest cell
+  // edges, and whether the noise polish ran (TreeRefinementResult::surface_scatter_cells,
+  // noise_polished); -1 and false when not measured (mode kNet among others).
+  double surface_scatter_cells = -1.0;
+  bool noise_polished = false;
   // The network's estimate before refinement (identity / the initial guess in mode kRefine) and
   // its mean peak score (an input of the confidence).
   Eigen::Isometry3d net_T_target_source = Eigen::Isometry3d::Identity();

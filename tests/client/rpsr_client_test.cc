@@ -22,6 +22,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
+#include "core/data/object_pairs.h"
 #include "core/data/pair_manifest.h"
 #include "core/data/registration_metrics.h"
 #include "core/io/point_cloud_io.h"
@@ -333,6 +334,40 @@ TEST_F(RpsrClientTest, LineRuleIsChosenUnlessGivenAndReported) {
           << scanner << ", given " << (given ? (*given ? "true" : "false") : "nothing");
     }
   }
+}
+
+// RegisterOptions::noise_polish reaches the server, and the result says how far the source's
+// points scatter about the target's surface and whether the polish ran: it does for a heavily
+// jittered object pair, not for the shipped clean one, and never when turned off.
+TEST_F(RpsrClientTest, NoisePolishRunsOnJitteredCloudsAndIsReported) {
+  core::PairOptions jittered_options;
+  jittered_options.split = core::ObjectSplit::kM2Unseen;
+  jittered_options.disturbance = core::DisturbanceKind::kJitter;
+  jittered_options.disturbance_level = 4;  // 0.08
+  absl::StatusOr<core::ObjectPair> jittered = core::MakeObjectPair(jittered_options, 2000);
+  ASSERT_TRUE(jittered.ok()) << jittered.status();
+  const SamplePair clean = LoadSample("object");
+  std::unique_ptr<Client> client = Connect();
+  absl::StatusOr<std::unique_ptr<Session>> session = client->CreateSession();
+  ASSERT_TRUE(session.ok()) << session.status();
+  RegisterOptions options;
+  absl::StatusOr<RegistrationResult> noisy =
+      (*session)->Register(jittered->source.points, jittered->target.points, options);
+  ASSERT_TRUE(noisy.ok()) << noisy.status();
+  EXPECT_TRUE(noisy->noise_polished) << noisy->failure_reason;
+  EXPECT_GE(noisy->surface_scatter_cells, 0.45);
+  absl::StatusOr<RegistrationResult> quiet =
+      (*session)->Register(clean.source.points, clean.target.points, options);
+  ASSERT_TRUE(quiet.ok()) << quiet.status();
+  EXPECT_FALSE(quiet->noise_polished);
+  EXPECT_GE(quiet->surface_scatter_cells, 0.0);
+  EXPECT_LT(quiet->surface_scatter_cells, 0.45);
+  options.noise_polish = false;
+  absl::StatusOr<RegistrationResult> off =
+      (*session)->Register(jittered->source.points, jittered->target.points, options);
+  ASSERT_TRUE(off.ok()) << off.status();
+  EXPECT_FALSE(off->noise_polished);
+  EXPECT_LT(off->surface_scatter_cells, 0.0);
 }
 
 TEST(RpsrClientRecoveryTest, EvictedCloudsAreUploadedAgain) {

@@ -91,6 +91,17 @@ TEST(ProtoConvertTest, JointFinestStageIsOnUnlessTurnedOff) {
   EXPECT_FALSE(options->refinement.joint_finest_stage);
 }
 
+TEST(ProtoConvertTest, NoisePolishIsOnUnlessTurnedOff) {
+  auto options = OptionsFromProto({});
+  ASSERT_TRUE(options.ok());
+  EXPECT_TRUE(options->refinement.noise_polish);
+  v1::RegisterOptions proto;
+  proto.set_noise_polish(false);
+  options = OptionsFromProto(proto);
+  ASSERT_TRUE(options.ok());
+  EXPECT_FALSE(options->refinement.noise_polish);
+}
+
 TEST(ProtoConvertTest, CoarseWideSearchIsOnUnlessTurnedOff) {
   const core::TreeRefinementOptions defaults;
   auto options = OptionsFromProto({});
@@ -162,6 +173,8 @@ TEST(ProtoConvertTest, ResultCarriesEverythingTheRegistrarSays) {
   result.num_degenerate = 1;
   result.held_at_initial = true;
   result.line_normals_from_planes = true;
+  result.surface_scatter_cells = 0.52;
+  result.noise_polished = true;
   result.mode = core::RegistrationMode::kRefine;
   result.timings.refine_seconds = 0.004;
   result.start = "searched";
@@ -176,6 +189,8 @@ TEST(ProtoConvertTest, ResultCarriesEverythingTheRegistrarSays) {
   EXPECT_TRUE(proto.degenerate_axes(3));
   EXPECT_TRUE(proto.held_at_initial());
   EXPECT_TRUE(proto.line_normals_from_planes());
+  EXPECT_EQ(proto.surface_scatter_cells(), 0.52);
+  EXPECT_TRUE(proto.noise_polished());
   EXPECT_EQ(proto.mode(), "refine");
   EXPECT_EQ(proto.timings().refine_seconds(), 0.004);
   EXPECT_EQ(proto.start(), "searched");

@@ -118,6 +118,7 @@ TEST(TreeRefinementTest, RebinnedCoarseStagesReachTheTruthMoreOften) {
   auto failures = [&](bool rebin) {
     TreeRefinementOptions options;
     options.rebin_coarse_depths = rebin;
+    options.noise_polish = false;  // the stages alone (the polish has noise_polish_test.cc)
     return FailuresFromPerturbedStarts(
         pair_options, options, 5.0, [&](const TreeRefinementResult& result) {
           EXPECT_EQ(result.stages.size(), 4u);  // one entry per depth 3..6, rounds folded in
@@ -168,6 +169,7 @@ TEST(TreeRefinementTest, JointFinestStageHoldsJitteredPairsCloser) {
   auto failures = [&](bool joint) {
     TreeRefinementOptions options;
     options.joint_finest_stage = joint;
+    options.noise_polish = false;  // the stages alone (the polish has noise_polish_test.cc)
     int failed = 0;
     for (double min_angle_deg : {2.0, 5.0}) {
       failed += FailuresFromPerturbedStarts(
@@ -198,10 +200,11 @@ TEST(TreeRefinementTest, CoarseStagesSearchingTwoCellsHoldHeavyJitterCloser) {
     return FailuresFromPerturbedStarts(pair_options, options, 2.0) +
            FailuresFromPerturbedStarts(pair_options, options, 5.0);
   };
-  const TreeRefinementOptions defaults;
+  TreeRefinementOptions defaults;
   EXPECT_TRUE(defaults.coarse_search_27_neighbors);
   EXPECT_EQ(defaults.coarse_max_correspondence_distance_cells, 2.0);
-  TreeRefinementOptions one_cell;  // the finest stage's search at every depth
+  defaults.noise_polish = false;  // the stages alone (the polish has noise_polish_test.cc)
+  TreeRefinementOptions one_cell = defaults;  // the finest stage's search at every depth
   SearchCoarseStagesAsTheFinest(one_cell);
   EXPECT_EQ(one_cell.coarse_search_27_neighbors, defaults.search_27_neighbors);
   EXPECT_EQ(one_cell.coarse_max_correspondence_distance_cells,
