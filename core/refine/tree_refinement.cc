@@ -1351,7 +1351,10 @@ TreeRefinementResult NoisePolish(const Octree& source, const Octree& target,
                                                 shapes, shared, scratch, ancestors);
   result.surface_scatter_cells = MedianSurfaceScatterCells(
       source, finest, finest_planes, result.T_target_source, kScatterMaxNodes);
-  if (result.surface_scatter_cells < options.noise_polish_min_scatter_cells) return result;
+  if (result.surface_scatter_cells < options.noise_polish_min_scatter_cells ||
+      result.fitness < options.noise_polish_min_fitness) {
+    return result;
+  }
   // The polish's planes: normals from the 3x3x3 block of cells centred on each node (a
   // grid-aligned ancestor's plane is off-centre for most of its nodes).
   PlaneLevel planes;

@@ -71,6 +71,8 @@ const std::vector<std::string>& ConfidenceFeatureNames() {
       "refine_correction_rel",
       "mode_net",
       "mode_refine",
+      "surface_scatter_cells",
+      "noise_polished",
   };
   return *names;
 }
@@ -146,6 +148,11 @@ std::vector<double> ConfidenceFeatureVector(const ConfidenceInputs& in) {
   f[kFeatureRefineCorrectionRel] = metres / extent;
   f[kFeatureModeNet] = r.mode == RegistrationMode::kNet ? 1.0 : 0.0;
   f[kFeatureModeRefine] = r.mode == RegistrationMode::kRefine ? 1.0 : 0.0;
+  // Polished answers are of noisy clouds, whose other measures read differently (a coarser last
+  // stage, normal distances of scattered points); unrelated clouds scatter as much (random volumes
+  // read up to 0.43 in net+refine when the fit knew neither).
+  f[kFeatureSurfaceScatterCells] = std::max(refined.surface_scatter_cells, 0.0);
+  f[kFeatureNoisePolished] = refined.noise_polished ? 1.0 : 0.0;
   for (double& v : f) {
     if (!std::isfinite(v)) v = 0.0;
   }

@@ -57,6 +57,8 @@ enum ConfidenceFeature {
   kFeatureRefineCorrectionRel,     // how far the refinement moved the source's CoM / extent
   kFeatureModeNet,                 // 1 in mode net
   kFeatureModeRefine,              // 1 in mode refine
+  kFeatureSurfaceScatterCells,     // the source's scatter about the target's planes (0: unmeasured)
+  kFeatureNoisePolished,           // 1 when the noise polish ran (tree_refinement.h)
   kNumConfidenceFeatures,
 };
 
