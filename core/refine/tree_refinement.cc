@@ -1330,7 +1330,7 @@ PlaneLevel PlaneLevelOf(const Octree& target, int depth, int normal_depth,
 
 // Scatter measurements read this many of the source's finest nodes at most (an even stride), and
 // the target's normals this many depths above the finest (the refinement's shapes there).
-constexpr size_t kScatterMaxNodes = 2048;
+constexpr size_t kScatterMaxNodes = 512;
 constexpr int kScatterNormalDepthsUp = 2;
 
 // The noise polish (TreeRefinementOptions::noise_polish) after the stages ended at

@@ -27,10 +27,16 @@ T OrDie(absl::StatusOr<T> value, const char* what) {
 }
 
 // Source, target, source, target, ... of `pairs` unseen-class object pairs of `num_points` each.
-inline std::vector<core::PointCloud> UnseenObjectClouds(int pairs, size_t num_points) {
+// `jitter_level` 1..4: the sources jittered at that evaluation level (0: clean).
+inline std::vector<core::PointCloud> UnseenObjectClouds(int pairs, size_t num_points,
+                                                        int jitter_level = 0) {
   core::PairOptions options;
   options.num_points = num_points;
   options.split = core::ObjectSplit::kM2Unseen;
+  if (jitter_level > 0) {
+    options.disturbance = core::DisturbanceKind::kJitter;
+    options.disturbance_level = jitter_level;
+  }
   std::vector<core::PointCloud> clouds;
   for (int i = 0; i < pairs; ++i) {
     core::ObjectPair pair = OrDie(core::MakeObjectPair(options, 100 + i), "object pair");

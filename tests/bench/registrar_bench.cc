@@ -65,6 +65,13 @@ const TreePairs& ObjectTrees() {
   return *pairs;
 }
 
+// The same objects with their sources jittered by 0.08 (where the noise polish runs).
+const TreePairs& JitteredObjectTrees() {
+  static const TreePairs* pairs =
+      new TreePairs{bench::TreesOf(bench::UnseenObjectClouds(16, 2048, 4), ToDepth(6))};
+  return *pairs;
+}
+
 const TreePairs& LidarTrees() {
   static const TreePairs* pairs = [] {
     LidarSequenceOptions options;
@@ -142,6 +149,34 @@ TreeRefinementOptions CoarseOneCell() {
   SearchCoarseStagesAsTheFinest(options);
   return options;
 }
+
+// The same pairs without the noise polish (TreeRefinementOptions::noise_polish): on clean pairs
+// it never runs, so the difference is its scatter measurement.
+TreeRefinementOptions NoNoisePolish() {
+  TreeRefinementOptions options;
+  options.noise_polish = false;
+  return options;
+}
+
+void BM_RegisterObjectsNoNoisePolish(benchmark::State& state) {
+  RunRegister(state, ObjectTrees(), false, SharedRegistrar(), NoNoisePolish());
+}
+BENCHMARK(BM_RegisterObjectsNoNoisePolish)
+    ->ArgName("mode")
+    ->Arg(static_cast<int>(RegistrationMode::kNetRefine))
+    ->Arg(static_cast<int>(RegistrationMode::kRefine))
+    ->Unit(benchmark::kMillisecond);
+
+// Objects jittered by 0.08, with the noise polish (polish:1) and without (polish:0).
+void BM_RegisterJitteredObjects(benchmark::State& state) {
+  RunRegister(state, JitteredObjectTrees(), false, SharedRegistrar(),
+              state.range(1) ? TreeRefinementOptions{} : NoNoisePolish());
+}
+BENCHMARK(BM_RegisterJitteredObjects)
+    ->ArgNames({"mode", "polish"})
+    ->Args({static_cast<int>(RegistrationMode::kNetRefine), 1})
+    ->Args({static_cast<int>(RegistrationMode::kNetRefine), 0})
+    ->Unit(benchmark::kMillisecond);
 
 void BM_RegisterObjectsFinestAlone(benchmark::State& state) {
   RunRegister(state, ObjectTrees(), false, SharedRegistrar(), FinestAlone());
@@ -231,6 +266,14 @@ BENCHMARK(BM_RegisterLidar)
     ->Arg(static_cast<int>(RegistrationMode::kNetRefine))
     ->Arg(static_cast<int>(RegistrationMode::kNet))
     ->Arg(static_cast<int>(RegistrationMode::kRefine))
+    ->Unit(benchmark::kMillisecond);
+
+void BM_RegisterLidarNoNoisePolish(benchmark::State& state) {
+  RunRegister(state, LidarTrees(), false, SharedRegistrar(), NoNoisePolish());
+}
+BENCHMARK(BM_RegisterLidarNoNoisePolish)
+    ->ArgName("mode")
+    ->Arg(static_cast<int>(RegistrationMode::kNetRefine))
     ->Unit(benchmark::kMillisecond);
 
 void BM_RegisterLidarFinestAlone(benchmark::State& state) {
