@@ -11,14 +11,13 @@
 // costs precision (coarser nodes sag inside curved surfaces), so it runs only when the measured
 // scatter says the finest depth is finer than the data.
 //
-// Measured (`rpsr eval --protocol objects --split unseen --count 100 --seed S --disturbance D
-// --level L`, recall at (1 deg, 0.01), scratch switch before it was an option, seeds 1 / 2 / 3):
-// jitter 0.08 0.19 / 0.16 / 0.11 -> 0.35 / 0.31 / 0.35; jitter 0.05 0.54 / 0.49 / 0.54 -> 0.61 /
-// 0.53 / 0.55; clean, noise, outliers and crop unchanged on seeds 1 and 2 (the scatter stays below
-// the threshold there). The depths were chosen on seed 1 and held on seed 3: normals from one
-// depth coarser than the nodes (jitter 0.05 / 0.08 0.32 / 0.15 on seed 1) or three (0.34 / 0.20 on
-// seed 3) did worse than two, which reads a neighbourhood about four nodes across, as Open3D's
-// normals read a radius of two voxels.
+// Measured (`rpsr eval --protocol objects --split unseen --count 100 --seed S --disturbance jitter
+// --level 3|4`, recall at (1 deg, 0.01), seeds 1 / 2 / 3): jitter 0.05 0.54 / 0.49 / 0.54 -> 0.66 /
+// 0.67 / 0.61, jitter 0.08 0.19 / 0.16 / 0.11 -> 0.46 / 0.44 / 0.45; clean, noise, outliers and
+// crop within a pair on seeds 1 and 2 (their scatter stays below the threshold). Chosen on seed 1,
+// held on seeds 2 and 3: the nodes one depth above the finest (two above: 0.51 / 0.25 on seed 1),
+// the target's normals from the 3x3x3 block around each node (BlockNormals; the variants in
+// tests/bench/notes/refinement-notes.md, *The noise polish*).
 #ifndef RPSR_CORE_REFINE_NOISE_POLISH_H_
 #define RPSR_CORE_REFINE_NOISE_POLISH_H_
 
@@ -48,7 +47,7 @@ struct PlaneLevel {
 // kept. On unseen objects under jitter (the polish one depth above the finest, depth 5), these
 // normals rather than those of each node's ancestor two depths up (a grid-aligned patch, off-centre
 // for most of its nodes): recall at (1 deg, 0.01), jitter 0.05 / 0.08, seeds 1 / 2 / 3, 0.60 /
-// 0.30, 0.57 / 0.33, 0.55 / 0.36 -> 0.66 / 0.47, 0.67 / 0.44, 0.61 / 0.45; a 5x5x5 block on seed 1
+// 0.30, 0.57 / 0.33, 0.56 / 0.36 -> 0.66 / 0.47, 0.67 / 0.44, 0.61 / 0.45; a 5x5x5 block on seed 1
 // 0.63 / 0.37. One tree, one depth, one thread.
 class BlockNormals {
  public:
@@ -68,10 +67,11 @@ class BlockNormals {
 // |n . (T * CoM - q)|, q the nearest target CoM among the 27 target cells around the moved node
 // and n its plane's normal, in cell edges of the target level: about 0.67 sigma / edge for
 // points with Gaussian scatter sigma about the surface. Measured at the unseen objects' finest
-// depth (6) after the refinement, medians over 100 pairs: clean 0.12 (0.36 at the 95th
-// percentile), jitter 0.01 / 0.03 / 0.05 / 0.08 0.30 / 0.38 / 0.51 / 0.61, noise 40% 0.26,
-// outliers 40% 0.17, crop 40% 0.15; KITTI-style scans at depth 9 0.02. Negative when no node has
-// a partner.
+// depth (6) at the refinement's answer, over 100 pairs (`rpsr eval --protocol objects --split
+// unseen --count 100`, every start): clean median 0.17 (95th percentile 0.37), jitter 0.02 / 0.03 /
+// 0.05 / 0.08 0.32 / 0.39 / 0.51 / 0.60 (5th percentiles 0.23 / 0.32 / 0.43 / 0.52), noise 40%
+// 0.29, outliers 40% 0.20, crop 40% 0.18; KITTI-style scans at depth 9 0.02-0.04. Negative when no
+// node has a partner.
 double MedianSurfaceScatterCells(const Octree& source, int source_depth, const PlaneLevel& target,
                                  const Eigen::Isometry3d& T_target_source, size_t max_nodes);
 
