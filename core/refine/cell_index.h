@@ -18,12 +18,14 @@
 #define RPSR_CORE_REFINE_CELL_INDEX_H_
 
 #include <algorithm>
+#include <array>
 #include <cassert>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
 
 #include "absl/container/flat_hash_map.h"
+#include "core/tree/morton.h"
 
 namespace rpsr::core {
 
@@ -99,6 +101,36 @@ class CellIndex {
   std::vector<int32_t> rank_;       // occupied cells in the words before
   absl::flat_hash_map<uint64_t, int32_t> hash_;
 };
+
+// The nodes of a block of cells of a level with `cells` per axis, -1 for an empty cell or one
+// outside the level, into out[0 .. block): block 27, the 3x3x3 cells around `home` (z, then y,
+// then x from -1 to 1); block 8, the 2x2x2 cells nearest to a point in `home` whose offset from
+// the cell's centre has the signs `side` (+1 or -1 per axis), which hold every cell within half a
+// cell edge of it. The correspondence searches of the refinement and of the noise polish.
+inline void FindBlock(const CellIndex& index, const std::array<uint32_t, 3>& home,
+                      const std::array<int, 3>& side, int block, int64_t cells, int32_t* out) {
+  auto find = [&](int64_t x, int64_t y, int64_t z) -> int32_t {
+    if (x < 0 || y < 0 || z < 0 || x >= cells || y >= cells || z >= cells) return -1;
+    return index.Find(EncodeMorton<3>(
+        {static_cast<uint32_t>(x), static_cast<uint32_t>(y), static_cast<uint32_t>(z)}));
+  };
+  int slot = 0;
+  if (block == 27) {
+    for (int dz = -1; dz <= 1; ++dz) {
+      for (int dy = -1; dy <= 1; ++dy) {
+        for (int dx = -1; dx <= 1; ++dx) {
+          out[slot++] = find(int64_t{home[0]} + dx, int64_t{home[1]} + dy, int64_t{home[2]} + dz);
+        }
+      }
+    }
+    return;
+  }
+  for (int b = 0; b < 8; ++b) {
+    out[slot++] =
+        find(int64_t{home[0]} + ((b & 1) ? side[0] : 0), int64_t{home[1]} + ((b & 2) ? side[1] : 0),
+             int64_t{home[2]} + ((b & 4) ? side[2] : 0));
+  }
+}
 
 }  // namespace rpsr::core
 

@@ -53,28 +53,7 @@ class BlockCandidates {
     int32_t* slots = &candidates_[static_cast<size_t>(block_) * k];
     if (home_[k] != key) {
       home_[k] = key;
-      auto find = [&](int64_t x, int64_t y, int64_t z) -> int32_t {
-        if (x < 0 || y < 0 || z < 0 || x >= cells || y >= cells || z >= cells) return -1;
-        return target_.index->Find(EncodeMorton<3>(
-            {static_cast<uint32_t>(x), static_cast<uint32_t>(y), static_cast<uint32_t>(z)}));
-      };
-      int slot = 0;
-      if (block_ == 27) {
-        for (int dz = -1; dz <= 1; ++dz) {
-          for (int dy = -1; dy <= 1; ++dy) {
-            for (int dx = -1; dx <= 1; ++dx) {
-              slots[slot++] =
-                  find(int64_t{home[0]} + dx, int64_t{home[1]} + dy, int64_t{home[2]} + dz);
-            }
-          }
-        }
-      } else {
-        for (int b = 0; b < 8; ++b) {
-          slots[slot++] = find(int64_t{home[0]} + ((b & 1) ? side[0] : 0),
-                               int64_t{home[1]} + ((b & 2) ? side[1] : 0),
-                               int64_t{home[2]} + ((b & 4) ? side[2] : 0));
-        }
-      }
+      FindBlock(*target_.index, home, side, block_, cells, slots);
     }
     // The nearest; only when it has no plane, the nearest of those that have one.
     for (bool need_plane : {false, true}) {

@@ -537,8 +537,8 @@ int32_t FindPartner(const Octree& target, DepthData& data, size_t k, const Eigen
   for (int a = 0; a < 3; ++a) {
     if (!(f[a] > -1.0 && f[a] < cells + 1.0)) return -1;
   }
-  uint32_t home[3];
-  int side[3];
+  std::array<uint32_t, 3> home;
+  std::array<int, 3> side;
   uint8_t side_bits = 0;
   for (int a = 0; a < 3; ++a) {
     const double clamped = std::clamp(f[a], 0.0, cells - 1.0);
@@ -546,35 +546,13 @@ int32_t FindPartner(const Octree& target, DepthData& data, size_t k, const Eigen
     side[a] = (f[a] - static_cast<double>(home[a]) >= 0.5) ? 1 : -1;
     if (side[a] > 0) side_bits |= static_cast<uint8_t>(1 << a);
   }
-  const uint64_t home_code = EncodeMorton<3>({home[0], home[1], home[2]});
+  const uint64_t home_code = EncodeMorton<3>(home);
   const int block = data.block_size;
   int32_t* candidates = &data.block_nodes[k * block];
   if (data.block_home[k] != home_code || (block == 8 && data.block_sides[k] != side_bits)) {
     data.block_home[k] = home_code;
     data.block_sides[k] = side_bits;
-    const int64_t max_cell = static_cast<int64_t>(cells) - 1;
-    auto lookup = [&](int64_t x, int64_t y, int64_t z) -> int32_t {
-      if (x < 0 || y < 0 || z < 0 || x > max_cell || y > max_cell || z > max_cell) return -1;
-      return data.target->index.Find(EncodeMorton<3>(
-          {static_cast<uint32_t>(x), static_cast<uint32_t>(y), static_cast<uint32_t>(z)}));
-    };
-    int slot = 0;
-    if (block == 27) {
-      for (int dz = -1; dz <= 1; ++dz) {
-        for (int dy = -1; dy <= 1; ++dy) {
-          for (int dx = -1; dx <= 1; ++dx) {
-            candidates[slot++] =
-                lookup(int64_t{home[0]} + dx, int64_t{home[1]} + dy, int64_t{home[2]} + dz);
-          }
-        }
-      }
-    } else {
-      for (int b = 0; b < 8; ++b) {
-        candidates[slot++] = lookup(int64_t{home[0]} + ((b & 1) ? side[0] : 0),
-                                    int64_t{home[1]} + ((b & 2) ? side[1] : 0),
-                                    int64_t{home[2]} + ((b & 4) ? side[2] : 0));
-      }
-    }
+    FindBlock(data.target->index, home, side, block, static_cast<int64_t>(cells), candidates);
   }
   const Octree::Level& level = target.level(depth);
   int32_t best = -1;

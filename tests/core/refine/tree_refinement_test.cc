@@ -29,48 +29,14 @@ using ::testing::HasSubstr;
 using ::testing::Not;
 using testing_util::Corridor;
 using testing_util::ExpectSameRefinement;
+using testing_util::FailuresFromPerturbedStarts;
 using testing_util::Perturbed;
 using testing_util::Plane;
 using testing_util::RefinementTree;
 using testing_util::Sphere;
+using testing_util::UnseenPairs;
 
 constexpr double kDeg = M_PI / 180.0;
-
-// Unseen-class object pairs with their source disturbed at `level` (0..4).
-PairOptions UnseenPairs(DisturbanceKind disturbance, int level) {
-  PairOptions options;
-  options.split = ObjectSplit::kM2Unseen;
-  options.disturbance = disturbance;
-  options.disturbance_level = level;
-  return options;
-}
-
-// Refines `pairs` object pairs of `pair_options` (seeds 1000..) from the truth perturbed by
-// a..3a degrees and 0.01a..0.02a (a = min_angle_deg; 5: 5-15 degrees and 0.05-0.1, network-sized
-// errors) and counts those ending beyond (1 deg, 0.01); `check` also sees each result.
-int FailuresFromPerturbedStarts(
-    const PairOptions& pair_options, const TreeRefinementOptions& options,
-    double min_angle_deg = 5.0,
-    const std::function<void(const TreeRefinementResult&)>& check = nullptr, int pairs = 60) {
-  std::mt19937_64 rng(11);
-  std::uniform_real_distribution<double> angle(min_angle_deg, 3.0 * min_angle_deg);
-  std::uniform_real_distribution<double> shift(0.01 * min_angle_deg, 0.02 * min_angle_deg);
-  int failed = 0;
-  for (uint64_t seed = 0; seed < static_cast<uint64_t>(pairs); ++seed) {
-    auto pair = MakeObjectPair(pair_options, 1000 + seed);
-    EXPECT_TRUE(pair.ok()) << pair.status();
-    const Octree source = RefinementTree(pair->source, 6);
-    const Octree target = RefinementTree(pair->target, 6);
-    const Eigen::Isometry3d initial =
-        Perturbed(pair->T_target_source, angle(rng) * kDeg, shift(rng), rng);
-    auto result = RefineOnTrees(source, target, initial, options);
-    EXPECT_TRUE(result.ok()) << result.status();
-    const PairError error = ErrorOf(result->T_target_source, pair->T_target_source);
-    failed += error.rotation_deg > 1.0 || error.translation > 0.01;
-    if (check) check(*result);
-  }
-  return failed;
-}
 
 TEST(TreeRefinementTest, ObjectsConvergeFromNetworkSizedErrors) {
   PairOptions pair_options;

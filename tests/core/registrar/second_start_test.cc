@@ -59,8 +59,12 @@ TEST(RegistrarSecondStartTest, KeepsTheBetterOfTheNetworksStartAndTheGuess) {
     EXPECT_EQ(b->starts, 1);
     EXPECT_EQ(both->start, is_a ? "network" : "initial") << "frame " << first;
     // A confident first answer is kept alone; the second start ran where the answer is its own.
-    if (a->confidence >= 0.9) EXPECT_EQ(both->starts, 1) << "frame " << first;
-    if (!is_a) EXPECT_EQ(both->starts, 2) << "frame " << first;
+    if (a->confidence >= 0.9) {
+      EXPECT_EQ(both->starts, 1) << "frame " << first;
+    }
+    if (!is_a) {
+      EXPECT_EQ(both->starts, 2) << "frame " << first;
+    }
     if (!is_a) {
       ++from_guess;
       EXPECT_LT(a->confidence, 0.9) << "a confident first answer is kept, frame " << first;
