@@ -54,6 +54,7 @@ class BlockNormals {
   BlockNormals(const Octree& tree, int depth, const CellIndex& index);
   // nullptr when the block holds fewer than 3 points.
   const Eigen::Vector3d* Of(int node);
+  int depth() const { return depth_; }
 
  private:
   const Octree& tree_;

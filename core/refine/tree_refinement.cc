@@ -399,6 +399,8 @@ struct TreeRefinementCache::Impl {
   int fractions_min_count = -1;
   std::optional<double> source_fraction;
   std::optional<double> target_fraction;
+  // The noise polish's target normals (one depth; every start on the pair reads the same ones).
+  std::unique_ptr<BlockNormals> block_normals;
 
   void BindTo(const Octree& s, const Octree& t) {
     if (source == &s && target == &t) return;
@@ -406,7 +408,16 @@ struct TreeRefinementCache::Impl {
     target = &t;
     sources.clear();
     targets.clear();
+    block_normals.reset();
     fractions_min_count = -1;
+  }
+
+  // The noise polish's normals at `depth` of the bound target, with `index` (that depth's).
+  BlockNormals& BlockNormalsAt(int depth, const CellIndex& index) {
+    if (block_normals == nullptr || block_normals->depth() != depth) {
+      block_normals = std::make_unique<BlockNormals>(*target, depth, index);
+    }
+    return *block_normals;
   }
 
   // The options' line rule for the bound pair: as given, or chosen from the trees' fractions
@@ -1339,7 +1350,7 @@ TreeRefinementResult NoisePolish(const Octree& source, const Octree& target,
   planes.tree = &target;
   planes.depth = depth;
   planes.index = &shared.Target(depth, shapes).side->index;
-  BlockNormals normals(target, depth, *planes.index);
+  BlockNormals& normals = shared.BlockNormalsAt(depth, *planes.index);
   planes.normal = [&normals](int node) { return normals.Of(node); };
   const PlanePolishResult polished =
       PolishPointToPlane(source, depth, planes, result.T_target_source);
