@@ -209,11 +209,17 @@ PlanePolishResult PolishPointToPlane(const Octree& source, int source_depth,
       H.noalias() += term.weight * J * J.transpose();
       b.noalias() += term.weight * term.residual * J;
     }
+    // A trace-relative damping keeps directions the planes leave free (along a plane) from
+    // dividing by zero; their steps are then ~0, as b has no component there.
+    const double mean_diagonal = H.trace() / 6.0;
+    if (!(mean_diagonal > 0.0)) break;
+    H.diagonal().array() += 1e-9 * mean_diagonal;
     const Eigen::LDLT<Eigen::Matrix<double, 6, 6>> solver(H);
     if (solver.info() != Eigen::Success) break;
     const Eigen::Matrix<double, 6, 1> x = solver.solve(-b);
     if (!x.allFinite()) break;
     const double angle = x.head<3>().norm();
+    if (angle > options.max_step_rad || x.tail<3>().norm() > options.max_step_cells * edge) break;
     const Eigen::Matrix3d dR =
         angle > 0.0 ? Eigen::AngleAxisd(angle, x.head<3>() / angle).toRotationMatrix()
                     : Eigen::Matrix3d::Identity();

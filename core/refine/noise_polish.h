@@ -90,6 +90,11 @@ struct PlanePolishOptions {
   // Fewer correspondences than this: no update (a handful of nodes cannot hold six degrees of
   // freedom).
   int min_correspondences = 12;
+  // A polish corrects an answer by a fraction of a degree and of a cell: a step that would turn it
+  // by more than max_step_rad or move its matched points by more than max_step_cells cell edges
+  // (directions the planes leave free, as along a plane or a corridor) stops it where it stands.
+  double max_step_rad = 0.05;
+  double max_step_cells = 1.0;
 };
 
 struct PlanePolishResult {

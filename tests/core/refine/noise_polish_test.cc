@@ -139,8 +139,38 @@ TEST(NoisePolishTest, ResultDescribesThePolishedPose) {
   EXPECT_GE(polished_pairs, 4);  // jitter 0.08 reads above the threshold on most pairs
 }
 
+// On a jittered plane the planes constrain only three directions: the polish keeps the pose
+// finite and moves it neither along the plane nor about its normal.
+TEST(NoisePolishTest, StaysPutAlongWhatThePlanesLeaveFree) {
+  PointCloud plane = testing_util::Plane(4000, 1);
+  PointCloud jittered = testing_util::Plane(4000, 2);
+  std::mt19937_64 rng(9);
+  std::normal_distribution<float> noise(0.0f, 0.02f);
+  for (auto& p : jittered.points) p.z() += noise(rng);
+  const Octree source = RefinementTree(jittered, kDepth);
+  const Octree target = RefinementTree(plane, kDepth);
+  const CellIndex index(target.level(kDepth - 1).morton, kDepth - 1);
+  BlockNormals normals(target, kDepth - 1, index);
+  PlaneLevel planes;
+  planes.tree = &target;
+  planes.depth = kDepth - 1;
+  planes.index = &index;
+  planes.normal = [&normals](int node) { return normals.Of(node); };
+  Eigen::Isometry3d initial = Eigen::Isometry3d::Identity();
+  initial.translation() = Eigen::Vector3d(0.01, -0.01, 0.005);
+  const PlanePolishResult result = PolishPointToPlane(source, kDepth - 1, planes, initial);
+  ASSERT_TRUE(result.T_target_source.matrix().allFinite());
+  EXPECT_GT(result.iterations, 0);
+  const Eigen::Vector3d t = result.T_target_source.translation();
+  EXPECT_NEAR(t.x(), 0.01, 1e-3);  // free along the plane
+  EXPECT_NEAR(t.y(), -0.01, 1e-3);
+  EXPECT_NEAR(t.z(), 0.0, 0.005);  // the normal's offset is removed
+  const Eigen::AngleAxisd turn(result.T_target_source.linear());
+  EXPECT_LT(turn.angle(), 0.01);
+}
+
 // The polish alone, from a 3-degree error on a clean object whose source is the target's own
-// points moved: it converges close to the truth.
+// points moved: it converges close to the truth, unless its steps are capped below what it needs.
 TEST(NoisePolishTest, PointToPlaneConvergesFromSmallErrors) {
   auto pair = MakeObjectPair(UnseenPairs(DisturbanceKind::kNone, 0), 5000);
   ASSERT_TRUE(pair.ok()) << pair.status();
@@ -167,6 +197,13 @@ TEST(NoisePolishTest, PointToPlaneConvergesFromSmallErrors) {
   EXPECT_LT(after.rotation_deg, 0.5);
   EXPECT_LT(after.translation, 0.005);
   EXPECT_LT(after.rotation_deg, before.rotation_deg / 5.0);
+  // A step larger than the polish allows (here: any turn at all) stops it where it stands.
+  PlanePolishOptions tiny_steps;
+  tiny_steps.max_step_rad = 1e-9;
+  const PlanePolishResult stopped =
+      PolishPointToPlane(source, kDepth - 1, planes, initial, tiny_steps);
+  EXPECT_EQ(stopped.iterations, 0);
+  EXPECT_EQ(stopped.T_target_source.matrix(), initial.matrix());
 }
 
 }  // namespace
