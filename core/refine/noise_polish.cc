@@ -94,6 +94,15 @@ BlockNormals::BlockNormals(const Octree& tree, int depth, const CellIndex& index
       normals_(tree.level(depth).size()),
       state_(tree.level(depth).size(), 0) {}
 
+PlaneLevel BlockNormals::Planes() {
+  PlaneLevel planes;
+  planes.tree = &tree_;
+  planes.depth = depth_;
+  planes.index = &index_;
+  planes.normal = [this](int node) { return Of(node); };
+  return planes;
+}
+
 const Eigen::Vector3d* BlockNormals::Of(int node) {
   const size_t k = static_cast<size_t>(node);
   if (state_[k] == 0) {
@@ -103,23 +112,15 @@ const Eigen::Vector3d* BlockNormals::Of(int node) {
     double count = 0.0;
     Eigen::Vector3d first = Eigen::Vector3d::Zero();
     Eigen::Matrix3d second = Eigen::Matrix3d::Zero();
-    for (int dz = -1; dz <= 1; ++dz) {
-      for (int dy = -1; dy <= 1; ++dy) {
-        for (int dx = -1; dx <= 1; ++dx) {
-          const int64_t x = int64_t{home[0]} + dx;
-          const int64_t y = int64_t{home[1]} + dy;
-          const int64_t z = int64_t{home[2]} + dz;
-          if (x < 0 || y < 0 || z < 0 || x >= cells || y >= cells || z >= cells) continue;
-          const int32_t j = index_.Find(EncodeMorton<3>(
-              {static_cast<uint32_t>(x), static_cast<uint32_t>(y), static_cast<uint32_t>(z)}));
-          if (j < 0) continue;
-          const double w = level.count[j];
-          const Eigen::Vector3d mean = level.center_of_mass[j].cast<double>();
-          count += w;
-          first += w * mean;
-          second += w * (tree_.Covariance(depth_, j).cast<double>() + mean * mean.transpose());
-        }
-      }
+    std::array<int32_t, 27> block;
+    FindBlock(index_, home, {}, 27, cells, block.data());
+    for (const int32_t j : block) {
+      if (j < 0) continue;
+      const double w = level.count[j];
+      const Eigen::Vector3d mean = level.center_of_mass[j].cast<double>();
+      count += w;
+      first += w * mean;
+      second += w * (tree_.Covariance(depth_, j).cast<double>() + mean * mean.transpose());
     }
     state_[k] = -1;
     if (count >= 3.0) {

@@ -55,6 +55,8 @@ class BlockNormals {
   // nullptr when the block holds fewer than 3 points.
   const Eigen::Vector3d* Of(int node);
   int depth() const { return depth_; }
+  // The level's planes with these normals, for PolishPointToPlane (valid while this lives).
+  PlaneLevel Planes();
 
  private:
   const Octree& tree_;

@@ -1346,12 +1346,8 @@ TreeRefinementResult NoisePolish(const Octree& source, const Octree& target,
   }
   // The polish's planes: normals from the 3x3x3 block of cells centred on each node (a
   // grid-aligned ancestor's plane is off-centre for most of its nodes).
-  PlaneLevel planes;
-  planes.tree = &target;
-  planes.depth = depth;
-  planes.index = &shared.Target(depth, shapes).side->index;
-  BlockNormals& normals = shared.BlockNormalsAt(depth, *planes.index);
-  planes.normal = [&normals](int node) { return normals.Of(node); };
+  const PlaneLevel planes =
+      shared.BlockNormalsAt(depth, shared.Target(depth, shapes).side->index).Planes();
   const PlanePolishResult polished =
       PolishPointToPlane(source, depth, planes, result.T_target_source);
   if (polished.iterations == 0) return result;
