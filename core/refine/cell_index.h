@@ -24,7 +24,9 @@
 #include <cstdint>
 #include <vector>
 
+#include "Eigen/Core"
 #include "absl/container/flat_hash_map.h"
+#include "core/tree/bh_tree.h"
 #include "core/tree/morton.h"
 
 namespace rpsr::core {
@@ -101,6 +103,32 @@ class CellIndex {
   std::vector<int32_t> rank_;       // occupied cells in the words before
   absl::flat_hash_map<uint64_t, int32_t> hash_;
 };
+
+// Where a point q falls on a tree's level of `depth`: its position in cell units (0 at the cube's
+// low corner, 2^depth cells per axis), the home cell the build would bin it in (clamped to the
+// level: CellOfPoint's quantization) and, per axis, the side of that cell's centre it lies on
+// (+1 or -1; bit a of side_bits when +1), which picks FindBlock's 2x2x2 block. Shared by the
+// refinement's and the polish's correspondence searches, whose cached blocks are keyed on it.
+struct BlockHome {
+  Eigen::Vector3d position;
+  std::array<uint32_t, 3> home;
+  std::array<int, 3> side;
+  uint8_t side_bits = 0;
+};
+
+inline BlockHome LocateBlockHome(const Octree& tree, int depth, const Eigen::Vector3d& q) {
+  const double cells = static_cast<double>(uint64_t{1} << depth);
+  const double scale = cells / (2.0 * tree.half_length());
+  BlockHome at;
+  at.position = (q - tree.center()).array() * scale + 0.5 * cells;
+  for (int a = 0; a < 3; ++a) {
+    const double clamped = std::clamp(at.position[a], 0.0, cells - 1.0);
+    at.home[a] = static_cast<uint32_t>(clamped);
+    at.side[a] = (at.position[a] - static_cast<double>(at.home[a]) >= 0.5) ? 1 : -1;
+    if (at.side[a] > 0) at.side_bits |= static_cast<uint8_t>(1 << a);
+  }
+  return at;
+}
 
 // The nodes of a block of cells of a level with `cells` per axis, -1 for an empty cell or one
 // outside the level, into out[0 .. block): block 27, the 3x3x3 cells around `home` (z, then y,

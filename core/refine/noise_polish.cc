@@ -34,26 +34,14 @@ class BlockCandidates {
   // The nearest target CoM to q (source node k) in its block, if it has a plane; else the nearest
   // that has one. Ties go to the lower index (the answer does not depend on the visiting order).
   Partner Nearest(size_t k, const Eigen::Vector3d& q) {
-    const Octree& tree = *target_.tree;
-    const Octree::Level& level = tree.level(target_.depth);
+    const Octree::Level& level = target_.tree->level(target_.depth);
     const int64_t cells = int64_t{1} << target_.depth;
-    const double scale = static_cast<double>(cells) / (2.0 * tree.half_length());
-    const Eigen::Vector3d f =
-        (q - tree.center()).array() * scale + 0.5 * static_cast<double>(cells);
-    std::array<uint32_t, 3> home;
-    std::array<int, 3> side;
-    uint64_t key = 0;
-    for (int a = 0; a < 3; ++a) {
-      const double clamped = std::clamp(f[a], 0.0, static_cast<double>(cells - 1));
-      home[a] = static_cast<uint32_t>(clamped);  // the build's quantization (CellOfPoint)
-      side[a] = f[a] - static_cast<double>(home[a]) >= 0.5 ? 1 : -1;
-      if (block_ == 8 && side[a] > 0) key |= uint64_t{1} << a;
-    }
-    key |= EncodeMorton<3>(home) << 3;
+    const BlockHome at = LocateBlockHome(*target_.tree, target_.depth, q);
+    const uint64_t key = (EncodeMorton<3>(at.home) << 3) | (block_ == 8 ? at.side_bits : 0);
     int32_t* slots = &candidates_[static_cast<size_t>(block_) * k];
     if (home_[k] != key) {
       home_[k] = key;
-      FindBlock(*target_.index, home, side, block_, cells, slots);
+      FindBlock(*target_.index, at.home, at.side, block_, cells, slots);
     }
     // The nearest; only when it has no plane, the nearest of those that have one.
     for (bool need_plane : {false, true}) {
@@ -210,8 +198,10 @@ PlanePolishResult PolishPointToPlane(const Octree& source, int source_depth,
       H.noalias() += term.weight * J * J.transpose();
       b.noalias() += term.weight * term.residual * J;
     }
-    // A trace-relative damping keeps directions the planes leave free (along a plane) from
-    // dividing by zero; their steps are then ~0, as b has no component there.
+    // A trace-relative damping keeps directions the planes leave free (along a plane, about a
+    // line's axis) from dividing rounding noise in b by rounding noise in H: that ratio is a step
+    // of any size, which the step cap below would refuse, stopping the whole polish (tested:
+    // DampingKeepsRoundingNoiseFromStoppingIt). Damped, those steps are ~0.
     const double mean_diagonal = H.trace() / 6.0;
     if (!(mean_diagonal > 0.0)) break;
     H.diagonal().array() += 1e-9 * mean_diagonal;

@@ -540,30 +540,20 @@ int32_t FindPartner(const Octree& target, DepthData& data, size_t k, const Eigen
                     double max_distance2) {
   const int depth = data.depth;
   const double cells = static_cast<double>(uint64_t{1} << depth);
-  const double scale = cells / (2.0 * target.half_length());
-  const Eigen::Vector3d f = (q - target.center()).array() * scale + 0.5 * cells;
+  const BlockHome at = LocateBlockHome(target, depth, q);
   // Farther than a cell outside the cube: skipped (beyond the reach of a one-cell search; a
   // two-cell search, coarse_max_correspondence_distance_cells, could still find a border cell
   // for it, but its block is built around the clamped home cell anyway).
   for (int a = 0; a < 3; ++a) {
-    if (!(f[a] > -1.0 && f[a] < cells + 1.0)) return -1;
+    if (!(at.position[a] > -1.0 && at.position[a] < cells + 1.0)) return -1;
   }
-  std::array<uint32_t, 3> home;
-  std::array<int, 3> side;
-  uint8_t side_bits = 0;
-  for (int a = 0; a < 3; ++a) {
-    const double clamped = std::clamp(f[a], 0.0, cells - 1.0);
-    home[a] = static_cast<uint32_t>(clamped);  // the build's quantization (CellOfPoint)
-    side[a] = (f[a] - static_cast<double>(home[a]) >= 0.5) ? 1 : -1;
-    if (side[a] > 0) side_bits |= static_cast<uint8_t>(1 << a);
-  }
-  const uint64_t home_code = EncodeMorton<3>(home);
+  const uint64_t home_code = EncodeMorton<3>(at.home);
   const int block = data.block_size;
   int32_t* candidates = &data.block_nodes[k * block];
-  if (data.block_home[k] != home_code || (block == 8 && data.block_sides[k] != side_bits)) {
+  if (data.block_home[k] != home_code || (block == 8 && data.block_sides[k] != at.side_bits)) {
     data.block_home[k] = home_code;
-    data.block_sides[k] = side_bits;
-    FindBlock(data.target->index, home, side, block, static_cast<int64_t>(cells), candidates);
+    data.block_sides[k] = at.side_bits;
+    FindBlock(data.target->index, at.home, at.side, block, static_cast<int64_t>(cells), candidates);
   }
   const Octree::Level& level = target.level(depth);
   int32_t best = -1;

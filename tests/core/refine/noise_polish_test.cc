@@ -165,6 +165,41 @@ TEST(NoisePolishTest, StaysPutAlongWhatThePlanesLeaveFree) {
   EXPECT_LT(turn.angle(), 0.01);
 }
 
+// A source that is a single straight line of points above a plane leaves the normal equations
+// four free directions (along the line and across it, about the line and about the plane's
+// normal): their pivots are rounding noise, and so is b there. Undamped, their ratio is a step of
+// any size, which the step cap refuses, so the polish would not even remove the plane's offset;
+// damped relative to the trace, those steps are ~0 and the offset goes.
+TEST(NoisePolishTest, DampingKeepsRoundingNoiseFromStoppingIt) {
+  // Turned off the axes, so that no normal or lever arm is exact and no pivot exactly zero.
+  const Eigen::Matrix3f turn =
+      Eigen::AngleAxisf(0.7f, Eigen::Vector3f(1.0f, 2.0f, 3.0f).normalized()).toRotationMatrix();
+  PointCloud plane = testing_util::Plane(4000, 1);
+  for (auto& p : plane.points) p = turn * p;
+  PointCloud line;
+  for (int i = 0; i < 400; ++i) {
+    line.points.push_back(
+        turn * Eigen::Vector3f(-0.9f + 1.8f * static_cast<float>(i) / 399.0f, 0.1f, 0.0f));
+  }
+  const Octree source = RefinementTree(line, kDepth);
+  const Octree target = RefinementTree(plane, kDepth);
+  const CellIndex index(target.level(kDepth - 1).morton, kDepth - 1);
+  BlockNormals normals(target, kDepth - 1, index);
+  const PlaneLevel planes = normals.Planes();
+  const Eigen::Matrix3d to_world = turn.cast<double>();
+  Eigen::Isometry3d initial = Eigen::Isometry3d::Identity();
+  initial.translation() = to_world * Eigen::Vector3d(0.02, -0.01, 0.01);
+  const PlanePolishResult result = PolishPointToPlane(source, kDepth - 1, planes, initial);
+  ASSERT_TRUE(result.T_target_source.matrix().allFinite());
+  EXPECT_GT(result.correspondences, 12);
+  EXPECT_GT(result.iterations, 0);
+  const Eigen::Vector3d t = to_world.transpose() * result.T_target_source.translation();
+  EXPECT_NEAR(t.z(), 0.0, 1e-3);   // the plane's offset removed
+  EXPECT_NEAR(t.x(), 0.02, 1e-3);  // nothing moved along the free directions
+  EXPECT_NEAR(t.y(), -0.01, 1e-3);
+  EXPECT_LT(Eigen::AngleAxisd(result.T_target_source.linear()).angle(), 1e-3);
+}
+
 // The polish alone, from a 3-degree error on a clean object whose source is the target's own
 // points moved: it converges close to the truth, unless its steps are capped below what it needs.
 TEST(NoisePolishTest, PointToPlaneConvergesFromSmallErrors) {
