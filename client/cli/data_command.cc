@@ -302,7 +302,7 @@ int RunObjectPairs() {
   std::optional<core::DisturbanceKind> kind = ParseDisturbanceFlag(disturbance);
   if (!kind) {
     return Fail(kBadFlags, absl::StrCat("unknown --disturbance '", disturbance,
-                                        "': use none, noise, outliers, crop or jitter"));
+                                        "': use none, noise, outliers, crop, jitter or partial"));
   }
   source.options.disturbance = *kind;
   source.options.disturbance_level = absl::GetFlag(FLAGS_level);

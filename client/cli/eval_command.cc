@@ -87,7 +87,8 @@ absl::StatusOr<std::vector<Setting>> ObjectSettings(
     std::optional<core::DisturbanceKind> kind =
         ParseDisturbanceFlag(absl::GetFlag(FLAGS_disturbance));
     if (!kind)
-      return absl::InvalidArgumentError("--disturbance: none, noise, outliers, crop or jitter");
+      return absl::InvalidArgumentError(
+          "--disturbance: none, noise, outliers, crop, jitter or partial");
     kinds.push_back({*kind, absl::GetFlag(FLAGS_level)});
   }
   const int count = absl::GetFlag(FLAGS_count);

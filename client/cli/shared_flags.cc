@@ -32,10 +32,12 @@ ABSL_FLAG(std::string, split, "",
           "default) or validation (the 70/20/10% blocks of each sequence)");
 ABSL_FLAG(std::string, disturbance, "none",
           "object pairs (data pairs, eval): what is done to the source: none, noise, outliers, "
-          "crop or jitter");
+          "crop or jitter; or partial: both clouds cropped, each along its own direction "
+          "(partial views)");
 ABSL_FLAG(int, level, 2,
           "object pairs (data pairs, eval): disturbance level 0..4 (noise/outliers "
-          "1,5,10,20,40% of the points; crop 1,10,20,30,40%; jitter tolerance "
+          "1,5,10,20,40% of the points; crop and partial 1,10,20,30,40% (of each cloud); jitter "
+          "tolerance "
           "0.01,0.02,0.03,0.05,0.08)");
 ABSL_FLAG(int, batch_size, 16, "pairs per forward pass (train: per optimisation step)");
 ABSL_FLAG(int, passes, 0,
@@ -124,6 +126,7 @@ std::optional<core::DisturbanceKind> ParseDisturbanceFlag(const std::string& nam
   if (name == "outliers") return core::DisturbanceKind::kUniformOutliers;
   if (name == "crop") return core::DisturbanceKind::kCrop;
   if (name == "jitter") return core::DisturbanceKind::kJitter;
+  if (name == "partial") return core::DisturbanceKind::kPartialViews;
   return std::nullopt;
 }
 

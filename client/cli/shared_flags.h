@@ -39,7 +39,7 @@ ABSL_DECLARE_FLAG(int, tree_depth);
 
 namespace rpsr::client {
 
-// The --disturbance names: none, noise, outliers, crop, jitter; nullopt for anything else.
+// The --disturbance names: none, noise, outliers, crop, jitter, partial; nullopt for anything else.
 std::optional<core::DisturbanceKind> ParseDisturbanceFlag(const std::string& name);
 
 // The --split names of the object protocol: m1, seen, unseen (any case); an empty name gives

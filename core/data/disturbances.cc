@@ -93,6 +93,8 @@ std::string DisturbanceName(DisturbanceKind kind) {
       return "crop";
     case DisturbanceKind::kJitter:
       return "jitter";
+    case DisturbanceKind::kPartialViews:
+      return "partial_views";
   }
   return "unknown";
 }
@@ -112,6 +114,7 @@ absl::StatusOr<double> DisturbanceMagnitudeAtLevel(DisturbanceKind kind, int lev
     case DisturbanceKind::kUniformOutliers:
       return kNoiseFractions[level];
     case DisturbanceKind::kCrop:
+    case DisturbanceKind::kPartialViews:
       return kCropFractions[level];
     case DisturbanceKind::kJitter:
       return kJitterTolerances[level];
@@ -127,7 +130,7 @@ absl::StatusOr<AppliedDisturbance> ApplyDisturbance(DisturbanceKind kind, double
                                                     uint64_t seed, PointCloud& cloud) {
   const bool is_fraction = kind == DisturbanceKind::kGaussianNoise ||
                            kind == DisturbanceKind::kUniformOutliers ||
-                           kind == DisturbanceKind::kCrop;
+                           kind == DisturbanceKind::kCrop || kind == DisturbanceKind::kPartialViews;
   if (is_fraction && !(magnitude >= 0.0 && magnitude <= 1.0)) {
     return absl::InvalidArgumentError(
         absl::StrCat(DisturbanceName(kind), " fraction ", magnitude, " outside [0, 1]"));
@@ -150,6 +153,7 @@ absl::StatusOr<AppliedDisturbance> ApplyDisturbance(DisturbanceKind kind, double
       ReplaceWithUniformOutliers(magnitude, random, cloud, applied);
       break;
     case DisturbanceKind::kCrop:
+    case DisturbanceKind::kPartialViews:
       CropChunk(magnitude, random, cloud, applied);
       break;
     case DisturbanceKind::kJitter:

@@ -1,4 +1,5 @@
-// The paper's four disturbances of a source cloud (Sec. 4) and their five evaluation levels.
+// The paper's four disturbances of a source cloud (Sec. 4) and their five evaluation levels, and
+// one beyond the paper: partial views, where the target is cropped too.
 // Counts are exact: a fraction f of an N-point cloud affects exactly AffectedPointCount(N, f) =
 // round(f * N) distinct points (half away from zero), so the benchmark's levels mean the same
 // thing for every cloud. Every random draw comes from SeededRandom, so a seed fixes the result.
@@ -30,9 +31,14 @@ enum class DisturbanceKind {
   // Every point moved by a Gaussian displacement (sigma = tolerance / 2 per axis) whose length is
   // clipped to the displacement tolerance.
   kJitter,
+  // Not the paper's: partial views on BOTH sides, as two scans of an object from different
+  // viewpoints (RPM-Net's partial-to-partial protocol). Applied to one cloud it is kCrop; a pair
+  // generator (object_pairs.h) crops the source and, along another random direction, the target,
+  // each by the same fraction, so the overlap is smaller than either cloud.
+  kPartialViews,
 };
 
-// "none", "gaussian_noise", "uniform_outliers", "crop", "jitter".
+// "none", "gaussian_noise", "uniform_outliers", "crop", "jitter", "partial_views".
 std::string DisturbanceName(DisturbanceKind kind);
 
 inline constexpr int kNumDisturbanceLevels = 5;
@@ -41,7 +47,7 @@ inline constexpr double kOutlierHalfExtent = 1.0;
 
 // The magnitude of `kind` at evaluation level 0..4 (the paper's five validation sets):
 //   noise and outliers: fraction of points 0.01, 0.05, 0.10, 0.20, 0.40;
-//   crop: fraction of points 0.01, 0.10, 0.20, 0.30, 0.40;
+//   crop and partial views: fraction of points (of each cloud) 0.01, 0.10, 0.20, 0.30, 0.40;
 //   jitter: displacement tolerance 0.01, 0.02, 0.03, 0.05, 0.08 (in the [-1, 1] object frame;
 //           the paper names no values beyond "increasing", and trains with 0.03 = level 2).
 // The paper's training mix uses level 3 for noise/outliers (20%), level 2 for crop (20%) and
@@ -58,8 +64,8 @@ struct AppliedDisturbance {
   DisturbanceKind kind = DisturbanceKind::kNone;
   double magnitude = 0.0;  // fraction of points, or the jitter tolerance
   std::vector<size_t> affected_indices;
-  // kCrop only: the unit direction along which the removed chunk lies; every removed point's
-  // projection on it is >= every kept point's (the chunk is cut off by a plane).
+  // kCrop and kPartialViews only: the unit direction along which the removed chunk lies; every
+  // removed point's projection on it is >= every kept point's (the chunk is cut off by a plane).
   Eigen::Vector3d crop_direction = Eigen::Vector3d::Zero();
 };
 

@@ -22,6 +22,7 @@ enum Stream : uint64_t {
   kTargetSamplingStream = 5,
   kDisturbanceStream = 6,
   kDisturbanceKindStream = 7,
+  kTargetDisturbanceStream = 8,
 };
 
 std::vector<size_t> FamiliesOf(ObjectSplit split) {
@@ -98,6 +99,14 @@ absl::StatusOr<ObjectPair> PairFromNormalizedMesh(const TriangleMesh& mesh,
       disturbance->first, disturbance->second, DeriveSeed(seed, kDisturbanceStream), pair.source);
   if (!applied.ok()) return applied.status();
   pair.disturbance = *std::move(applied);
+  if (disturbance->first == DisturbanceKind::kPartialViews) {
+    // Its own stream: the source's cut and every other draw stay as for kCrop at this seed.
+    absl::StatusOr<AppliedDisturbance> target_cut =
+        ApplyDisturbance(DisturbanceKind::kPartialViews, disturbance->second,
+                         DeriveSeed(seed, kTargetDisturbanceStream), pair.target);
+    if (!target_cut.ok()) return target_cut.status();
+    pair.target_disturbance = *std::move(target_cut);
+  }
   return pair;
 }
 
@@ -127,7 +136,8 @@ absl::Status ValidatePairOptions(const PairOptions& options) {
     const bool is_fraction = options.random_disturbance ||
                              options.disturbance == DisturbanceKind::kGaussianNoise ||
                              options.disturbance == DisturbanceKind::kUniformOutliers ||
-                             options.disturbance == DisturbanceKind::kCrop;
+                             options.disturbance == DisturbanceKind::kCrop ||
+                             options.disturbance == DisturbanceKind::kPartialViews;
     if (is_fraction && magnitude > 1.0) {
       return absl::InvalidArgumentError(
           absl::StrCat("disturbance fraction ", magnitude, " outside [0, 1]"));

@@ -44,8 +44,9 @@ struct PairOptions {
   double max_translation = 0.5;
   // Which families MakeObjectPair draws from.
   ObjectSplit split = ObjectSplit::kM1All;
-  // The disturbance applied to the source, at evaluation level `disturbance_level` (0..4, see
-  // DisturbanceMagnitudeAtLevel) unless `disturbance_magnitude` overrides it.
+  // The disturbance applied to the source (kPartialViews: to the target too, along another
+  // direction), at evaluation level `disturbance_level` (0..4, see DisturbanceMagnitudeAtLevel)
+  // unless `disturbance_magnitude` overrides it.
   DisturbanceKind disturbance = DisturbanceKind::kNone;
   int disturbance_level = 0;
   std::optional<double> disturbance_magnitude;
@@ -57,7 +58,7 @@ struct PairOptions {
 
 struct ObjectPair {
   PointCloud source;  // disturbed, in the object's normalised frame
-  PointCloud target;  // clean, in the target frame
+  PointCloud target;  // clean (cropped for kPartialViews), in the target frame
   // Maps source points into the target frame (transform_convention.h).
   Eigen::Isometry3d T_target_source = Eigen::Isometry3d::Identity();
   // The drawn Euler angles (x, y, z) in radians; T's rotation is RotationFromEulerXyz of them.
@@ -67,6 +68,9 @@ struct ObjectPair {
   // The seed GenerateObject used (0 for a caller-supplied mesh).
   uint64_t object_seed = 0;
   AppliedDisturbance disturbance;
+  // What was done to the target: kPartialViews' crop (indices into the full target sample), or
+  // kNone.
+  AppliedDisturbance target_disturbance;
 };
 
 // OK when the options describe a protocol: num_points > 0, max_angle_deg in (0, 180],

@@ -117,6 +117,22 @@ TEST_F(DataCommandTest, SameSeedWritesTheSamePairs) {
   EXPECT_EQ(source->size(), 128u - 38u);
 }
 
+// --disturbance partial: both clouds lose 30% at level 3, each its own chunk.
+TEST_F(DataCommandTest, PartialViewsCropBothClouds) {
+  ASSERT_EQ(RunData(absl::StrCat("pairs --count 2 --disturbance partial --level 3 --seed 9 "
+                                 "--num_points 128 --format xyz --output ",
+                                 Path("partial"))),
+            0)
+      << stderr_;
+  for (const char* side : {"source", "target"}) {
+    absl::StatusOr<core::PointCloud> cloud =
+        core::ReadPointCloud(Path(absl::StrCat("partial/clouds/000001_", side, ".xyz")));
+    ASSERT_TRUE(cloud.ok()) << cloud.status();
+    EXPECT_EQ(cloud->size(), 128u - 38u) << side;
+  }
+  EXPECT_THAT(ReadText(Path("partial/pairs.csv")), HasSubstr(",partial_views,0.3,90,90,"));
+}
+
 TEST_F(DataCommandTest, ObjectsAreNormalisedAndListed) {
   ASSERT_EQ(RunData(absl::StrCat("objects --count 3 --split seen --num_points 200 --output ",
                                  Path("objects"))),
@@ -248,7 +264,7 @@ TEST_F(DataCommandTest, BadFlagsExitWithTwoAndSayWhatToFix) {
   EXPECT_EQ(RunData("objects --split m3 --output " + Path("x")), 2);
   EXPECT_THAT(stderr_, HasSubstr("m1, seen or unseen"));
   EXPECT_EQ(RunData("pairs --disturbance blur --output " + Path("x")), 2);
-  EXPECT_THAT(stderr_, HasSubstr("none, noise, outliers, crop or jitter"));
+  EXPECT_THAT(stderr_, HasSubstr("none, noise, outliers, crop, jitter or partial"));
   EXPECT_EQ(RunData("pairs --level 7 --output " + Path("x")), 2);
   EXPECT_EQ(RunData("pairs --format las --output " + Path("x")), 2);
   EXPECT_EQ(RunData("pairs --protocol lidar --output " + Path("x")), 2);

@@ -29,6 +29,7 @@ TEST(DisturbanceLevelsTest, PaperLevels) {
     EXPECT_EQ(*DisturbanceMagnitudeAtLevel(DisturbanceKind::kGaussianNoise, level), noise[level]);
     EXPECT_EQ(*DisturbanceMagnitudeAtLevel(DisturbanceKind::kUniformOutliers, level), noise[level]);
     EXPECT_EQ(*DisturbanceMagnitudeAtLevel(DisturbanceKind::kCrop, level), crop[level]);
+    EXPECT_EQ(*DisturbanceMagnitudeAtLevel(DisturbanceKind::kPartialViews, level), crop[level]);
     if (level > 0) {
       EXPECT_GT(*DisturbanceMagnitudeAtLevel(DisturbanceKind::kJitter, level),
                 *DisturbanceMagnitudeAtLevel(DisturbanceKind::kJitter, level - 1));

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <set>
 
 #include "core/data/transform_convention.h"
@@ -231,6 +232,54 @@ TEST(ObjectPairsTest, RandomDisturbanceUsesAllFourAtTrainingMagnitudes) {
   }
   EXPECT_EQ(kinds.size(), 4u);
   EXPECT_EQ(kinds.count(DisturbanceKind::kNone), 0u);
+}
+
+// Partial views: the source is cut exactly as kCrop cuts it at the same seed, and the target loses
+// the same fraction along another direction, a contiguous chunk of the clean target; the truth
+// still maps every kept source point onto the surface where the clean pair has it.
+TEST(ObjectPairsTest, PartialViewsCropBothCloudsAlongTheirOwnDirections) {
+  PairOptions clean_options;
+  PairOptions crop_options;
+  crop_options.disturbance = DisturbanceKind::kCrop;
+  crop_options.disturbance_level = 3;
+  PairOptions partial_options = crop_options;
+  partial_options.disturbance = DisturbanceKind::kPartialViews;
+  for (uint64_t seed : {5u, 6u, 7u}) {
+    const ObjectPair clean = *MakeObjectPair(clean_options, seed);
+    const ObjectPair cropped = *MakeObjectPair(crop_options, seed);
+    const ObjectPair partial = *MakeObjectPair(partial_options, seed);
+    EXPECT_EQ(partial.source.points, cropped.source.points);
+    EXPECT_TRUE(partial.T_target_source.matrix() == clean.T_target_source.matrix());
+    EXPECT_EQ(partial.disturbance.kind, DisturbanceKind::kPartialViews);
+    EXPECT_EQ(cropped.target_disturbance.kind, DisturbanceKind::kNone);
+    ASSERT_EQ(partial.target_disturbance.kind, DisturbanceKind::kPartialViews);
+    const size_t n = clean.target.size();
+    const size_t removed = AffectedPointCount(n, 0.30);
+    ASSERT_EQ(partial.target.size(), n - removed);
+    ASSERT_EQ(partial.target_disturbance.affected_indices.size(), removed);
+    // The kept target points are the clean target's others, in order; the removed ones lie
+    // beyond a plane along the target's own direction, which is not the source's.
+    std::vector<bool> gone(n, false);
+    for (size_t i : partial.target_disturbance.affected_indices) gone[i] = true;
+    std::vector<Eigen::Vector3f> kept;
+    for (size_t i = 0; i < n; ++i) {
+      if (!gone[i]) kept.push_back(clean.target.points[i]);
+    }
+    EXPECT_EQ(partial.target.points, kept);
+    const Eigen::Vector3d d = partial.target_disturbance.crop_direction;
+    double lowest_removed = std::numeric_limits<double>::infinity();
+    double highest_kept = -std::numeric_limits<double>::infinity();
+    for (size_t i = 0; i < n; ++i) {
+      const double along = d.dot(clean.target.points[i].cast<double>());
+      if (gone[i]) {
+        lowest_removed = std::min(lowest_removed, along);
+      } else {
+        highest_kept = std::max(highest_kept, along);
+      }
+    }
+    EXPECT_GE(lowest_removed, highest_kept);
+    EXPECT_LT(d.dot(partial.disturbance.crop_direction), 0.999);
+  }
 }
 
 TEST(ObjectPairsTest, MagnitudeOverridesLevel) {
