@@ -53,7 +53,8 @@ ABSL_FLAG(std::string, mesh_folder, "",
           "procedural families; --split is then ignored");
 ABSL_FLAG(bool, same_points, false,
           "pairs --protocol objects: the target is the clean source mapped by the ground truth, "
-          "point for point (default: independent samples of the surface)");
+          "point for point (default: independent samples of the surface; with --disturbance "
+          "partial the target is then cropped too)");
 ABSL_FLAG(double, max_angle_deg, 45.0,
           "pairs --protocol objects: each Euler angle uniform in (0, this] degrees");
 ABSL_FLAG(double, max_translation, 0.5,
@@ -104,7 +105,7 @@ void PrintDataUsage() {
                "  rpsr data lidar --output DIR [--sequences 1 --frames 300 "
                "--style urban|suburban|open|parking --seed S]\n"
                "  rpsr data pairs --protocol objects --output DIR [--count N --split ... "
-               "--disturbance none|noise|outliers|crop|jitter --level 0..4 --same_points "
+               "--disturbance none|noise|outliers|crop|jitter|partial --level 0..4 --same_points "
                "--format ply --seed S]\n"
                "  rpsr data pairs --protocol lidar --kitti ROOT --sequence NN --output DIR "
                "[--ground keep|remove --split train|test|validation --max_pairs N --format bin]\n"

@@ -36,9 +36,8 @@ ABSL_FLAG(std::string, disturbance, "none",
           "(partial views)");
 ABSL_FLAG(int, level, 2,
           "object pairs (data pairs, eval): disturbance level 0..4 (noise/outliers "
-          "1,5,10,20,40% of the points; crop and partial 1,10,20,30,40% (of each cloud); jitter "
-          "tolerance "
-          "0.01,0.02,0.03,0.05,0.08)");
+          "1,5,10,20,40% of the points; crop and partial 1,10,20,30,40% (of each cloud); "
+          "jitter tolerance 0.01,0.02,0.03,0.05,0.08)");
 ABSL_FLAG(int, batch_size, 16, "pairs per forward pass (train: per optimisation step)");
 ABSL_FLAG(int, passes, 0,
           "network passes (Sec. 3.3); 0: 3 for train; elsewhere the mode's default: the "

@@ -34,7 +34,7 @@ enum class DisturbanceKind {
   // Not the paper's: partial views on BOTH sides, as two scans of an object from different
   // viewpoints (RPM-Net's partial-to-partial protocol). Applied to one cloud it is kCrop; a pair
   // generator (object_pairs.h) crops the source and, along another random direction, the target,
-  // each by the same fraction, so the overlap is smaller than either cloud.
+  // each by the same fraction, so the overlap is usually smaller than either cloud.
   kPartialViews,
 };
 

@@ -8,7 +8,8 @@
 //   3. source and target are sampled independently from the surface (or, with same_points, the
 //      target is the clean source mapped by T), and the target is mapped into its frame:
 //      target = T_target_source * points;
-//   4. the disturbance is applied to the source only.
+//   4. the disturbance is applied to the source only (kPartialViews also crops the target, from
+//      its own stream).
 // Every stage draws from its own stream derived from the pair's seed, so the same seed with
 // kNone gives exactly the undisturbed version of a disturbed pair, and pairs are identical across
 // runs and platforms.
@@ -32,7 +33,8 @@ namespace rpsr::core {
 enum class ObjectSplit { kM1All, kM2Seen, kM2Unseen };
 
 struct PairOptions {
-  // Points sampled for the source and for the target (before a crop shrinks the source). 1024
+  // Points sampled for the source and for the target (before a crop shrinks the source, or
+  // partial views both clouds). 1024
   // follows DCP's ModelNet40 protocol, which the paper compares against.
   size_t num_points = 1024;
   // false (the paper's harder, honest default): source and target are independent samples of the
@@ -68,8 +70,8 @@ struct ObjectPair {
   // The seed GenerateObject used (0 for a caller-supplied mesh).
   uint64_t object_seed = 0;
   AppliedDisturbance disturbance;
-  // What was done to the target: kPartialViews' crop (indices into the full target sample), or
-  // kNone.
+  // What was done to the target: kPartialViews' crop (indices into the full target sample; its
+  // crop_direction in the target frame, the source's in the source frame), or kNone.
   AppliedDisturbance target_disturbance;
 };
 

@@ -105,8 +105,9 @@ class CellIndex {
 };
 
 // Where a point q falls on a tree's level of `depth`: its position in cell units (0 at the cube's
-// low corner, 2^depth cells per axis), the home cell the build would bin it in (clamped to the
-// level: CellOfPoint's quantization) and, per axis, the side of that cell's centre it lies on
+// low corner, 2^depth cells per axis), its home cell (clamped to the level and truncated as
+// CellOfPoint does, up to rounding at cell faces; a NaN coordinate reads as cell 0, never as an
+// undefined cast) and, per axis, the side of that cell's centre it lies on
 // (+1 or -1; bit a of side_bits when +1), which picks FindBlock's 2x2x2 block. Shared by the
 // refinement's and the polish's correspondence searches, whose cached blocks are keyed on it.
 struct BlockHome {
@@ -122,7 +123,9 @@ inline BlockHome LocateBlockHome(const Octree& tree, int depth, const Eigen::Vec
   BlockHome at;
   at.position = (q - tree.center()).array() * scale + 0.5 * cells;
   for (int a = 0; a < 3; ++a) {
-    const double clamped = std::clamp(at.position[a], 0.0, cells - 1.0);
+    // std::clamp for finite values; a NaN fails `>= 0` and goes to 0.
+    const double p = at.position[a];
+    const double clamped = p >= 0.0 ? std::min(p, cells - 1.0) : 0.0;
     at.home[a] = static_cast<uint32_t>(clamped);
     at.side[a] = (at.position[a] - static_cast<double>(at.home[a]) >= 0.5) ? 1 : -1;
     if (at.side[a] > 0) at.side_bits |= static_cast<uint8_t>(1 << a);

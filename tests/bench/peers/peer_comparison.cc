@@ -130,7 +130,8 @@ ABSL_FLAG(std::string, settings, "",
           "lidar: of K1,K2 (default: both)");
 ABSL_FLAG(std::string, levels, "",
           "objects: comma-separated disturbance levels 0..4 run for each disturbance (noise, "
-          "outliers: 1,5,10,20,40% of the points; crop 1,10,20,30,40%; jitter 0.01,0.02,0.03,0.05,"
+          "outliers: 1,5,10,20,40% of the points; crop and partial 1,10,20,30,40%; jitter "
+          "0.01,0.02,0.03,0.05,"
           "0.08); default: the 20% set (noise, outliers 3, crop, jitter 2)");
 ABSL_FLAG(int, lidar_pairs, 20, "lidar: pairs per setting (spread over the sequences)");
 ABSL_FLAG(std::string, kitti, "",
@@ -251,8 +252,8 @@ absl::StatusOr<std::vector<Setting>> ObjectSettings() {
     kinds = std::move(each);
   }
   std::vector<Setting> settings;
+  const std::string wanted = absl::GetFlag(FLAGS_settings);
   for (const Kind& k : kinds) {
-    const std::string wanted = absl::GetFlag(FLAGS_settings);
     if (!Wanted(wanted, k.flag)) continue;
     if (k.kind == core::DisturbanceKind::kPartialViews && wanted.empty()) continue;
     core::PairOptions options = base;

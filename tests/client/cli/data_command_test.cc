@@ -117,7 +117,7 @@ TEST_F(DataCommandTest, SameSeedWritesTheSamePairs) {
   EXPECT_EQ(source->size(), 128u - 38u);
 }
 
-// --disturbance partial: both clouds lose 30% at level 3, each its own chunk.
+// --disturbance partial: both clouds lose 30% at level 3 (which chunk: object_pairs_test).
 TEST_F(DataCommandTest, PartialViewsCropBothClouds) {
   ASSERT_EQ(RunData(absl::StrCat("pairs --count 2 --disturbance partial --level 3 --seed 9 "
                                  "--num_points 128 --format xyz --output ",

@@ -167,6 +167,7 @@ TEST(DisturbancesTest, RejectsBadMagnitudes) {
   PointCloud cloud = TestCloud(10);
   EXPECT_EQ(ApplyDisturbance(DisturbanceKind::kCrop, 1.5, 0, cloud).status().code(),
             absl::StatusCode::kInvalidArgument);
+  EXPECT_FALSE(ApplyDisturbance(DisturbanceKind::kPartialViews, 1.5, 0, cloud).ok());
   EXPECT_FALSE(ApplyDisturbance(DisturbanceKind::kGaussianNoise, -0.1, 0, cloud).ok());
   EXPECT_FALSE(ApplyDisturbance(DisturbanceKind::kJitter, -0.1, 0, cloud).ok());
   EXPECT_FALSE(ApplyDisturbance(DisturbanceKind::kJitter, NAN, 0, cloud).ok());

@@ -258,7 +258,8 @@ TEST(ObjectPairsTest, PartialViewsCropBothCloudsAlongTheirOwnDirections) {
     ASSERT_EQ(partial.target.size(), n - removed);
     ASSERT_EQ(partial.target_disturbance.affected_indices.size(), removed);
     // The kept target points are the clean target's others, in order; the removed ones lie
-    // beyond a plane along the target's own direction, which is not the source's.
+    // beyond a plane along the target's own direction, drawn apart from the source's (which,
+    // mapped into the target frame, points elsewhere).
     std::vector<bool> gone(n, false);
     for (size_t i : partial.target_disturbance.affected_indices) gone[i] = true;
     std::vector<Eigen::Vector3f> kept;
@@ -278,7 +279,7 @@ TEST(ObjectPairsTest, PartialViewsCropBothCloudsAlongTheirOwnDirections) {
       }
     }
     EXPECT_GE(lowest_removed, highest_kept);
-    EXPECT_LT(d.dot(partial.disturbance.crop_direction), 0.999);
+    EXPECT_LT(d.dot(partial.T_target_source.linear() * partial.disturbance.crop_direction), 0.999);
   }
 }
 
@@ -322,6 +323,8 @@ TEST(ObjectPairsTest, RejectsInvalidOptions) {
   options.disturbance_level = 0;
   options.disturbance_magnitude = 1.5;
   EXPECT_FALSE(MakeObjectPair(options, 0).ok());
+  options.disturbance = DisturbanceKind::kPartialViews;
+  EXPECT_FALSE(ValidatePairOptions(options).ok());
   EXPECT_TRUE(ValidatePairOptions(PairOptions{}).ok());
 }
 

@@ -165,10 +165,12 @@ TEST(NoisePolishTest, StaysPutAlongWhatThePlanesLeaveFree) {
   EXPECT_LT(turn.angle(), 0.01);
 }
 
-// A source that is a single straight line of points above a plane leaves the normal equations
-// four free directions (along the line and across it, about the line and about the plane's
-// normal): their pivots are rounding noise, and so is b there. Undamped, their ratio is a step of
-// any size, which the step cap refuses, so the polish would not even remove the plane's offset;
+// A source that is a single straight line of points on a plane, started 0.01 above it, leaves the
+// normal equations four free directions (along the line and across it, about the line and about
+// the plane's normal): their pivots are rounding noise, and so is b there. Undamped, their ratio
+// is a step of any size, which the step cap refuses, so the polish would not even remove the
+// plane's offset (checked by removing the damping; a rounding-dependent guard, so the check may
+// pass undamped under other compiler flags);
 // damped relative to the trace, those steps are ~0 and the offset goes.
 TEST(NoisePolishTest, DampingKeepsRoundingNoiseFromStoppingIt) {
   // Turned off the axes, so that no normal or lever arm is exact and no pivot exactly zero.
