@@ -49,9 +49,8 @@ std::optional<core::ObjectSplit> ParseObjectSplitFlag(const std::string& name,
 
 // The registration flags the subcommands share (--passes, --refine_from_initial,
 // --search_scene_start, --rebin_coarse_depths, --joint_finest_stage, --noise_polish,
-// --coarse_wide_search,
-// --line_normals_from_planes, --hold_degenerate_at_initial) set on `options`; its mode and
-// initial guess stay the caller's.
+// --coarse_wide_search, --line_normals_from_planes, --hold_degenerate_at_initial) set on
+// `options`; its mode and initial guess stay the caller's.
 void ApplyRegistrationFlags(core::RegistrationOptions& options);
 
 // Whether the flag `name` was given on the command line (a subcommand then uses it as given

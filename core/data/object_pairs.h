@@ -34,8 +34,8 @@ enum class ObjectSplit { kM1All, kM2Seen, kM2Unseen };
 
 struct PairOptions {
   // Points sampled for the source and for the target (before a crop shrinks the source, or
-  // partial views both clouds). 1024
-  // follows DCP's ModelNet40 protocol, which the paper compares against.
+  // partial views both clouds). 1024 follows DCP's ModelNet40 protocol, which the paper compares
+  // against.
   size_t num_points = 1024;
   // false (the paper's harder, honest default): source and target are independent samples of the
   // surface, so no point has an exact partner. true: target = T * clean source, point for point.

@@ -104,6 +104,11 @@ class CellIndex {
   absl::flat_hash_map<uint64_t, int32_t> hash_;
 };
 
+// The edge of a cell of `tree`'s level `depth` (2^depth cells across the cube), in metres.
+inline double CellEdge(const Octree& tree, int depth) {
+  return 2.0 * tree.half_length() / static_cast<double>(uint64_t{1} << depth);
+}
+
 // Where a point q falls on a tree's level of `depth`: its position in cell units (0 at the cube's
 // low corner, 2^depth cells per axis), its home cell (clamped to the level and truncated as
 // CellOfPoint does, up to rounding at cell faces; a NaN coordinate reads as cell 0, never as an

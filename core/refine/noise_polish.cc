@@ -69,10 +69,6 @@ class BlockCandidates {
   std::vector<int32_t> candidates_;
 };
 
-double CellEdge(const PlaneLevel& target) {
-  return 2.0 * target.tree->half_length() / static_cast<double>(uint64_t{1} << target.depth);
-}
-
 }  // namespace
 
 BlockNormals::BlockNormals(const Octree& tree, int depth, const CellIndex& index)
@@ -128,7 +124,7 @@ double MedianSurfaceScatterCells(const Octree& source, int source_depth, const P
   const Octree::Level& target_level = target.tree->level(target.depth);
   if (level.size() == 0 || max_nodes == 0) return -1.0;
   const size_t stride = (level.size() + max_nodes - 1) / max_nodes;
-  const double edge = CellEdge(target);
+  const double edge = CellEdge(*target.tree, target.depth);
   std::vector<double> distances;
   distances.reserve(level.size() / stride + 1);
   // The 3x3x3 block, not the 2x2x2 nearest one: a node a cell off the surface often has no
@@ -156,7 +152,7 @@ PlanePolishResult PolishPointToPlane(const Octree& source, int source_depth,
   result.T_target_source = T_target_source;
   const Octree::Level& level = source.level(source_depth);
   const Octree::Level& target_level = target.tree->level(target.depth);
-  const double edge = CellEdge(target);
+  const double edge = CellEdge(*target.tree, target.depth);
   const double k2 = options.robust_scale_cells * options.robust_scale_cells * edge * edge;
   Eigen::Matrix3d R = T_target_source.linear();
   Eigen::Vector3d t = T_target_source.translation();

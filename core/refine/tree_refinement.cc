@@ -285,10 +285,6 @@ struct DepthData {
   std::vector<int32_t> block_nodes;
 };
 
-double EdgeOf(const Octree& tree, int depth) {
-  return 2.0 * tree.half_length() / static_cast<double>(uint64_t{1} << depth);
-}
-
 // Fills a new (empty) side.
 void PrepareSourceDepth(const Octree& source, int depth, const TreeRefinementOptions& options,
                         SourceDepth& side) {
@@ -297,7 +293,7 @@ void PrepareSourceDepth(const Octree& source, int depth, const TreeRefinementOpt
   side.rule = ShapeRuleOf(options);
   side.weights = options.weights;
   side.max_nodes = options.max_source_nodes_per_depth;
-  const double edge_source = EdgeOf(source, depth);
+  const double edge_source = CellEdge(source, depth);
   const Octree::Level& s = source.level(depth);
   const size_t n = s.size();
   const size_t used = std::min(n, static_cast<size_t>(options.max_source_nodes_per_depth));
@@ -342,7 +338,7 @@ void PrepareSourceDepth(const Octree& source, int depth, const TreeRefinementOpt
 void PrepareTargetDepth(const Octree& target, int depth, const ShapeRule& rule, TargetDepth& side) {
   side.depth = depth;
   side.rule = rule;
-  side.edge = EdgeOf(target, depth);
+  side.edge = CellEdge(target, depth);
   const Octree::Level& t = target.level(depth);
   side.index = CellIndex(t.morton, depth);
   side.nodes = t.size();
@@ -1343,7 +1339,7 @@ TreeRefinementResult NoisePolish(const Octree& source, const Octree& target,
   if (polished.iterations == 0) return result;
   DepthStage stage;
   stage.depth = depth;
-  stage.cell_edge = EdgeOf(target, depth);
+  stage.cell_edge = CellEdge(target, depth);
   stage.source_nodes = static_cast<int>(source.level(depth).size());
   stage.correspondences = polished.correspondences;
   stage.iterations = polished.iterations;

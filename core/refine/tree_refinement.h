@@ -239,8 +239,7 @@ struct TreeRefinementOptions {
   // pose. 0.45 lies above the clean unseen objects' 95th percentile (0.37) and near the 5th of
   // jitter 0.05 (0.43); scans (0.02-0.04) never reach it. Unseen objects, recall at (1 deg, 0.01),
   // jitter 0.05 / 0.08: 0.54 / 0.19 -> 0.66 / 0.46 (noise_polish.h). The proto's
-  // RegisterOptions.noise_polish, the CLI's
-  // --noise_polish.
+  // RegisterOptions.noise_polish, the CLI's --noise_polish.
   // It polishes an answer the stages found, and only one where most of the source lies on the
   // target's surface (fitness at least noise_polish_min_fitness): unrelated clouds scatter as much
   // as heavy jitter (median 0.61 against 0.59) and, polished, read more confident (held-out
