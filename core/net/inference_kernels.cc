@@ -1,11 +1,14 @@
 #include "core/net/inference_kernels.h"
 
 #include <ATen/Parallel.h>
+#include <dlfcn.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <vector>
 
 #include "Eigen/Core"
 #include "Eigen/LU"
@@ -41,6 +44,107 @@ torch::Tensor GatherRowsOrZero(const torch::Tensor& features, const torch::Tenso
       }
     }
   });
+  return out;
+}
+
+namespace {
+
+// Fortran BLAS's sgemm, looked up at run time in the BLAS that LibTorch links (rpsr does not
+// link one itself; see BlasDescription). Column-major, arguments by pointer.
+using SgemmFunction = void (*)(const char* transa, const char* transb, const int* m, const int* n,
+                               const int* k, const float* alpha, const float* a, const int* lda,
+                               const float* b, const int* ldb, const float* beta, float* c,
+                               const int* ldc);
+
+SgemmFunction Sgemm() {
+  static const SgemmFunction sgemm = reinterpret_cast<SgemmFunction>(dlsym(RTLD_DEFAULT, "sgemm_"));
+  return sgemm;
+}
+
+// rows x width (row-major, leading dimension ldc) += / = a (rows x C, row-major) times the
+// block W_k = weight[:, kC:(k+1)C] transposed. In column-major terms: c^T (width x rows) =
+// W_k (width x C) a^T, W_k read transposed from weight's row-major [width, 27 C] storage.
+void MultiplyByOffsetBlock(const float* a, int64_t rows, int64_t channels, const float* weight,
+                           int offset, int64_t width, float beta, float* c) {
+  const int m = static_cast<int>(width), n = static_cast<int>(rows);
+  const int k = static_cast<int>(channels), lda = static_cast<int>(27 * channels);
+  const float one = 1.0f;
+  Sgemm()("T", "N", &m, &n, &k, &one, weight + offset * channels, &lda, a, &k, &beta, c, &m);
+}
+
+}  // namespace
+
+bool SparseTreeConvAvailable() { return Sgemm() != nullptr; }
+
+torch::Tensor SparseTreeConvLinear(const torch::Tensor& features, const torch::Tensor& neighbors,
+                                   const torch::Tensor& weight, const torch::Tensor& bias) {
+  TORCH_CHECK(SparseTreeConvAvailable(), "no sgemm_ in the loaded BLAS");
+  const torch::Tensor x = features.contiguous();
+  const torch::Tensor nbr = neighbors.contiguous().to(torch::kInt64);
+  const torch::Tensor w = weight.contiguous();
+  TORCH_CHECK(x.dim() == 2 && nbr.dim() == 2 && nbr.size(1) == 27 && w.dim() == 2,
+              "features must be [N, C], neighbors [M, 27], weight [C', 27 C]");
+  const int64_t rows_in = x.size(0);
+  const int64_t channels = x.size(1);
+  const int64_t rows_out = nbr.size(0);
+  const int64_t width = w.size(0);
+  TORCH_CHECK(w.size(1) == 27 * channels, "weight must be [C', 27 C] for C = ", channels);
+  TORCH_CHECK(!bias.defined() || bias.numel() == width, "bias must have C' = ", width, " values");
+  constexpr int64_t kIntMax = std::numeric_limits<int>::max();
+  TORCH_CHECK(rows_out <= kIntMax && 27 * channels <= kIntMax && width <= kIntMax,
+              "tree convolution too large for BLAS's int sizes");
+  torch::Tensor out =
+      bias.defined() ? bias.contiguous().reshape({1, width}).expand({rows_out, width}).contiguous()
+                     : torch::zeros({rows_out, width}, x.options());
+  const int64_t* idx = nbr.data_ptr<int64_t>();
+  const float* in = x.data_ptr<float>();
+  const float* wp = w.data_ptr<float>();
+  float* dst = out.data_ptr<float>();
+
+  // The rulebook: for each of the 27 offsets, the (output row, input row) pairs whose neighbour
+  // is present, laid out offset after offset (a counting sort).
+  std::array<int64_t, 28> start{};
+  for (int64_t i = 0; i < rows_out * 27; ++i) start[i % 27 + 1] += idx[i] != rows_in;
+  for (int k = 0; k < 27; ++k) start[k + 1] += start[k];
+  std::vector<int32_t> pair_out(start[27]), pair_in(start[27]);
+  std::array<int64_t, 27> next;
+  std::copy(start.begin(), start.begin() + 27, next.begin());
+  for (int64_t i = 0; i < rows_out; ++i) {
+    for (int k = 0; k < 27; ++k) {
+      const int64_t j = idx[i * 27 + k];
+      if (j == rows_in) continue;
+      TORCH_CHECK(j >= 0 && j < rows_in, "neighbour index ", j, " outside [0, ", rows_in, "]");
+      pair_out[next[k]] = static_cast<int32_t>(i);
+      pair_in[next[k]++] = static_cast<int32_t>(j);
+    }
+  }
+
+  // The centre offset of a same-depth convolution is each node itself: one GEMM straight into
+  // the output, with no gather and no scatter.
+  bool centre_is_self = rows_in == rows_out && start[14] - start[13] == rows_out;
+  for (int64_t i = 0; centre_is_self && i < rows_out; ++i) centre_is_self = idx[i * 27 + 13] == i;
+  if (centre_is_self && rows_out > 0) {
+    MultiplyByOffsetBlock(in, rows_out, channels, wp, 13, width, 1.0f, dst);
+  }
+  std::vector<float> gathered, product;
+  for (int k = 0; k < 27; ++k) {
+    const int64_t n = start[k + 1] - start[k];
+    if (n == 0 || (k == 13 && centre_is_self)) continue;
+    const int32_t* out_rows = pair_out.data() + start[k];
+    const int32_t* in_rows = pair_in.data() + start[k];
+    gathered.resize(n * channels);
+    product.resize(n * width);
+    for (int64_t r = 0; r < n; ++r) {
+      std::memcpy(gathered.data() + r * channels, in + static_cast<int64_t>(in_rows[r]) * channels,
+                  channels * sizeof(float));
+    }
+    MultiplyByOffsetBlock(gathered.data(), n, channels, wp, k, width, 0.0f, product.data());
+    for (int64_t r = 0; r < n; ++r) {
+      float* o = dst + static_cast<int64_t>(out_rows[r]) * width;
+      const float* v = product.data() + r * width;
+      for (int64_t c = 0; c < width; ++c) o[c] += v[c];
+    }
+  }
   return out;
 }
 

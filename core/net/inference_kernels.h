@@ -1,4 +1,5 @@
-// CPU inference versions of the network's gather, pooling and SVD steps (private to core/net).
+// CPU inference versions of the network's gather, convolution, pooling and SVD steps (private to
+// core/net).
 //
 // Why: at inference on CPU the tree convolutions' GEMMs are about half of a pass (LibTorch's
 // profiler, one 2,048-point object pair); much of the rest was generic operators on small rows
@@ -24,6 +25,20 @@ bool UseInferenceKernels(const torch::Tensor& t);
 // rows[i] = features[indices[i]], or zeros where indices[i] == features.size(0).
 // features [N, C] float, indices int64 of any shape with R elements; returns [R, C].
 torch::Tensor GatherRowsOrZero(const torch::Tensor& features, const torch::Tensor& indices);
+
+// The tree convolution's linear map, skipping empty neighbours instead of multiplying their
+// zero rows: out[i] = bias + sum over k with neighbors[i, k] present of
+// weight[:, kC:(k+1)C] features[neighbors[i, k]], one BLAS GEMM per offset k (a "rulebook", as
+// sparse convolution libraries do). features [N, C] float, neighbors [M, 27] int64 with N for an
+// empty neighbour, weight [C', 27 C] and bias [C'] (or undefined) as torch::nn::Linear holds
+// them; returns [M, C']. The same sums as Linear over the gathered rows, in another order
+// (equal within float rounding). Why: a tree's 3x3x3 neighbourhoods are about half empty (an
+// object's depths 3 and 4 hold 13-14 of the 27), so half of the gathered GEMM multiplies zeros.
+torch::Tensor SparseTreeConvLinear(const torch::Tensor& features, const torch::Tensor& neighbors,
+                                   const torch::Tensor& weight, const torch::Tensor& bias);
+
+// False when the loaded BLAS exports no Fortran sgemm_ (SparseTreeConvLinear then throws).
+bool SparseTreeConvAvailable();
 
 // out[p] = max over the 8 slots of features[slots[p, k]], a slot equal to features.size(0)
 // counting as a zero row. features [N, C] float, slots [P, 8] int64; returns [P, C].

@@ -7,6 +7,12 @@
 namespace rpsr::core::net {
 namespace {
 
+// Inputs narrower than this take the gathered GEMM at inference too: 27 GEMMs with an inner
+// dimension of 1 (densities) or 6 (positions) cost more than one over the zero rows (measured,
+// rpsr_net_bench: with every convolution on the rulebook objects took 14.2-14.3 ms a pair, with
+// the depth-5 inputs gathered 13.7; all gathered 14.7).
+constexpr int64_t kSparseConvMinChannels = 16;
+
 // Copies `values` into a [rows, cols] int64 tensor, adding `offset` to valid indices and
 // mapping -1 to `empty`.
 void AppendIndices(const std::vector<int32_t>& values, int64_t offset, int64_t* out) {
@@ -104,6 +110,11 @@ TreeConvImpl::TreeConvImpl(int64_t in_channels, int64_t out_channels) : in_chann
 }
 
 torch::Tensor TreeConvImpl::forward(const torch::Tensor& features, const torch::Tensor& neighbors) {
+  if (UseInferenceKernels(features) && in_channels_ >= kSparseConvMinChannels &&
+      SparseTreeConvAvailable()) {
+    return torch::relu(
+        norm_->forward(SparseTreeConvLinear(features, neighbors, linear_->weight, linear_->bias)));
+  }
   const int64_t rows = neighbors.size(0);
   torch::Tensor gathered = UseInferenceKernels(features)
                                ? GatherRowsOrZero(features, neighbors)

@@ -1,6 +1,6 @@
 // The CPU inference kernels give what the differentiable operators they replace give: the
-// gather and the pooling exactly, the SVD head within double rounding; and they are chosen only
-// where no gradient is wanted.
+// gather and the pooling exactly, the rulebook convolution within float rounding, the SVD head
+// within double rounding; and they are chosen only where no gradient is wanted.
 #include "core/net/inference_kernels.h"
 
 #include <torch/torch.h>
@@ -105,23 +105,86 @@ TEST(InferenceKernelsTest, ChosenOnlyWithoutGradientOnCpuFloat) {
   }
 }
 
+// Neighbour lists as a tree has them: the centre (offset 13) is each node itself.
+torch::Tensor WithSelfAtCentre(torch::Tensor neighbors) {
+  neighbors.index_put_({torch::indexing::Slice(), 13}, torch::arange(neighbors.size(0)));
+  return neighbors;
+}
+
+TEST(InferenceKernelsTest, SparseTreeConvEqualsTheLinearMapOverGatheredRows) {
+  if (!SparseTreeConvAvailable()) GTEST_SKIP() << "the loaded BLAS exports no sgemm_";
+  for (int64_t channels : {1, 16, 64}) {
+    torch::manual_seed(21 + channels);
+    torch::nn::Linear linear(27 * channels, 48);
+    torch::Tensor features = torch::randn({400, channels});
+    torch::Tensor random = IndicesWithEmpty(400, 400, 27, 23 + channels);
+    // Centre = self takes the direct GEMM; random centres and a coarser output depth (fewer
+    // rows than inputs) take the gathered one.
+    for (const torch::Tensor& neighbors :
+         {WithSelfAtCentre(random.clone()), random, IndicesWithEmpty(90, 400, 27, 29)}) {
+      torch::NoGradGuard no_grad;
+      torch::Tensor expected = linear->forward(WithZeroRow(features)
+                                                   .index_select(0, neighbors.reshape({-1}))
+                                                   .reshape({neighbors.size(0), 27 * channels}));
+      torch::Tensor got = SparseTreeConvLinear(features, neighbors, linear->weight, linear->bias);
+      ASSERT_EQ(got.sizes(), expected.sizes());
+      EXPECT_TRUE(torch::allclose(got, expected, 1e-5, 1e-5)) << "channels " << channels;
+    }
+  }
+}
+
+TEST(InferenceKernelsTest, SparseTreeConvHandlesEmptyAndAllEmptyNeighbourhoods) {
+  if (!SparseTreeConvAvailable()) GTEST_SKIP() << "the loaded BLAS exports no sgemm_";
+  torch::NoGradGuard no_grad;
+  torch::nn::Linear linear(27 * 16, 8);
+  torch::Tensor features = torch::randn({5, 16});
+  // No rows at all, and a row whose 27 neighbours are all empty: only the bias.
+  EXPECT_EQ(SparseTreeConvLinear(features, torch::empty({0, 27}, torch::kInt64), linear->weight,
+                                 linear->bias)
+                .sizes(),
+            (std::vector<int64_t>{0, 8}));
+  torch::Tensor lonely = torch::full({1, 27}, 5, torch::kInt64);
+  EXPECT_TRUE(torch::equal(SparseTreeConvLinear(features, lonely, linear->weight, linear->bias),
+                           linear->bias.reshape({1, 8})));
+}
+
+TEST(InferenceKernelsTest, SparseTreeConvRejectsIndicesAndShapesItCannotUse) {
+  if (!SparseTreeConvAvailable()) GTEST_SKIP() << "the loaded BLAS exports no sgemm_";
+  torch::NoGradGuard no_grad;
+  torch::nn::Linear linear(27 * 16, 8);
+  torch::Tensor features = torch::randn({10, 16});
+  torch::Tensor neighbors = torch::full({2, 27}, 10, torch::kInt64);
+  neighbors[1][4] = 11;
+  EXPECT_THROW(SparseTreeConvLinear(features, neighbors, linear->weight, linear->bias), c10::Error);
+  neighbors[1][4] = -1;
+  EXPECT_THROW(SparseTreeConvLinear(features, neighbors, linear->weight, linear->bias), c10::Error);
+  torch::Tensor narrower = torch::randn({10, 8});
+  EXPECT_THROW(SparseTreeConvLinear(narrower, torch::full({2, 27}, 10, torch::kInt64),
+                                    linear->weight, linear->bias),
+               c10::Error);
+}
+
 // A tree convolution and the pooling after it: the inference path gives the training path's
 // features (inputs that carry a gradient take the generic gather and pooling).
 TEST(InferenceKernelsTest, TreeConvolutionAndPoolingMatchTheTrainingPath) {
-  torch::manual_seed(9);
-  TreeConv conv(6, 32);
-  conv->eval();
-  torch::Tensor features = torch::randn({500, 6});
-  torch::Tensor neighbors = IndicesWithEmpty(500, 500, 27, 13);
-  torch::Tensor slots = IndicesWithEmpty(300, 500, 8, 17);  // above the pooling's grain of 256
-  torch::Tensor slow =
-      PoolToParents(conv->forward(features.clone().requires_grad_(true), neighbors), slots);
-  torch::Tensor fast;
-  {
-    torch::InferenceMode inference;
-    fast = PoolToParents(conv->forward(features, neighbors), slots);
+  // 6 input channels take the gathered GEMM at inference, 32 the rulebook (the network's depth-5
+  // and depth-4 convolutions).
+  for (int64_t channels : {6, 32}) {
+    torch::manual_seed(9);
+    TreeConv conv(channels, 32);
+    conv->eval();
+    torch::Tensor features = torch::randn({500, channels});
+    torch::Tensor neighbors = WithSelfAtCentre(IndicesWithEmpty(500, 500, 27, 13));
+    torch::Tensor slots = IndicesWithEmpty(300, 500, 8, 17);  // above the pooling's grain of 256
+    torch::Tensor slow =
+        PoolToParents(conv->forward(features.clone().requires_grad_(true), neighbors), slots);
+    torch::Tensor fast;
+    {
+      torch::InferenceMode inference;
+      fast = PoolToParents(conv->forward(features, neighbors), slots);
+    }
+    EXPECT_TRUE(torch::allclose(fast, slow.detach(), 1e-5, 1e-5)) << "channels " << channels;
   }
-  EXPECT_TRUE(torch::allclose(fast, slow.detach(), 1e-6, 1e-6));
 }
 
 }  // namespace
