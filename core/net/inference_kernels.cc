@@ -49,8 +49,9 @@ torch::Tensor GatherRowsOrZero(const torch::Tensor& features, const torch::Tenso
 
 namespace {
 
-// Fortran BLAS's sgemm, looked up at run time in the BLAS that LibTorch links (rpsr does not
-// link one itself; see BlasDescription). Column-major, arguments by pointer.
+// Fortran BLAS's sgemm, looked up at run time among the process's global symbols (rpsr links no
+// BLAS itself; see BlasDescription): the BLAS LibTorch links, unless the application loaded
+// another sgemm_ before it. Column-major, arguments by pointer.
 using SgemmFunction = void (*)(const char* transa, const char* transb, const int* m, const int* n,
                                const int* k, const float* alpha, const float* a, const int* lda,
                                const float* b, const int* ldb, const float* beta, float* c,
@@ -84,6 +85,8 @@ torch::Tensor SparseTreeConvLinear(const torch::Tensor& features, const torch::T
   const torch::Tensor w = weight.contiguous();
   TORCH_CHECK(x.dim() == 2 && nbr.dim() == 2 && nbr.size(1) == 27 && w.dim() == 2,
               "features must be [N, C], neighbors [M, 27], weight [C', 27 C]");
+  TORCH_CHECK(x.scalar_type() == torch::kFloat32 && w.scalar_type() == torch::kFloat32,
+              "features and weight must be float32");
   const int64_t rows_in = x.size(0);
   const int64_t channels = x.size(1);
   const int64_t rows_out = nbr.size(0);
@@ -91,11 +94,20 @@ torch::Tensor SparseTreeConvLinear(const torch::Tensor& features, const torch::T
   TORCH_CHECK(w.size(1) == 27 * channels, "weight must be [C', 27 C] for C = ", channels);
   TORCH_CHECK(!bias.defined() || bias.numel() == width, "bias must have C' = ", width, " values");
   constexpr int64_t kIntMax = std::numeric_limits<int>::max();
-  TORCH_CHECK(rows_out <= kIntMax && 27 * channels <= kIntMax && width <= kIntMax,
-              "tree convolution too large for BLAS's int sizes");
-  torch::Tensor out =
-      bias.defined() ? bias.contiguous().reshape({1, width}).expand({rows_out, width}).contiguous()
-                     : torch::zeros({rows_out, width}, x.options());
+  TORCH_CHECK(
+      rows_in <= kIntMax && rows_out <= kIntMax && 27 * channels <= kIntMax && width <= kIntMax,
+      "tree convolution too large for BLAS's int sizes");
+  // A fresh tensor, never a view: with one row, expand(...).contiguous() would hand back the
+  // bias's own storage, and the sums below would write into the model.
+  torch::Tensor out = torch::zeros({rows_out, width}, x.options());
+  if (bias.defined()) {
+    const torch::Tensor b = bias.detach().to(torch::kFloat32).contiguous();
+    const float* bp = b.data_ptr<float>();
+    float* op = out.data_ptr<float>();
+    for (int64_t i = 0; i < rows_out; ++i) std::copy(bp, bp + width, op + i * width);
+  }
+  // No products to add (and BLAS rejects zero leading dimensions).
+  if (rows_out == 0 || channels == 0 || width == 0) return out;
   const int64_t* idx = nbr.data_ptr<int64_t>();
   const float* in = x.data_ptr<float>();
   const float* wp = w.data_ptr<float>();

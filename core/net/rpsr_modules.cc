@@ -10,7 +10,8 @@ namespace {
 // Inputs narrower than this take the gathered GEMM at inference too: 27 GEMMs with an inner
 // dimension of 1 (densities) or 6 (positions) cost more than one over the zero rows (measured,
 // rpsr_net_bench: with every convolution on the rulebook objects took 14.2-14.3 ms a pair, with
-// the depth-5 inputs gathered 13.7; all gathered 14.7).
+// the depth-5 inputs gathered 13.7; all gathered 14.7; tests/bench/results/
+// rulebook_conv_exploration.txt).
 constexpr int64_t kSparseConvMinChannels = 16;
 
 // Copies `values` into a [rows, cols] int64 tensor, adding `offset` to valid indices and
@@ -110,8 +111,10 @@ TreeConvImpl::TreeConvImpl(int64_t in_channels, int64_t out_channels) : in_chann
 }
 
 torch::Tensor TreeConvImpl::forward(const torch::Tensor& features, const torch::Tensor& neighbors) {
-  if (UseInferenceKernels(features) && in_channels_ >= kSparseConvMinChannels &&
-      SparseTreeConvAvailable()) {
+  // The rulebook computes no gradient: the weights must not want one either (features without
+  // a gradient can meet weights that have one, e.g. when an earlier layer is frozen).
+  if (UseInferenceKernels(features) && UseInferenceKernels(linear_->weight) &&
+      in_channels_ >= kSparseConvMinChannels && SparseTreeConvAvailable()) {
     return torch::relu(
         norm_->forward(SparseTreeConvLinear(features, neighbors, linear_->weight, linear_->bias)));
   }

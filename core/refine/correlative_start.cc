@@ -7,6 +7,7 @@
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
+#include "core/refine/cell_index.h"
 #include "core/tree/morton.h"
 
 namespace rpsr::core {
@@ -60,8 +61,7 @@ absl::StatusOr<CorrelativeStart> FindCorrelativeStart(const Octree& source, cons
                      "; max_shift_cells and max_yaw_deg non-negative, max_source_nodes positive"));
   }
   const Occupancy occupied(target, depth);
-  const double cells = static_cast<double>(int64_t{1} << depth);
-  const double edge = 2.0 * target.half_length() / cells;
+  const double edge = CellEdge(target, depth);
   const Eigen::Vector3d corner = target.center() - Eigen::Vector3d::Constant(target.half_length());
 
   // The scored source nodes, moved by the initial guess, about the pivot (their weighted CoM).

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "core/refine/cell_index.h"
 #include "core/tree/morton.h"
 
 namespace rpsr::core {
@@ -19,7 +20,7 @@ double MeanNodeDistanceCells(const Octree& source, const Octree& target,
   const Octree::Level& coarse = target.level(depth - 1);
   if (s.size() == 0 || t.size() == 0 || options.max_source_nodes == 0) return -1.0;
   const int64_t cells = int64_t{1} << (depth - 1);
-  const double coarse_edge = 2.0 * target.half_length() / static_cast<double>(cells);
+  const double coarse_edge = CellEdge(target, depth - 1);
   const double edge = 0.5 * coarse_edge;
   // The cap is one cell of depth - 1: every target node within it lies in the 27 cells of depth
   // - 1 around the one holding the moved node.

@@ -13,6 +13,7 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
 #include "absl/strings/strip.h"
+#include "core/refine/cell_index.h"
 
 namespace rpsr::core {
 namespace {
@@ -85,8 +86,7 @@ std::vector<double> ConfidenceFeatureVector(const ConfidenceInputs& in) {
   const TreeRefinementResult& refined = *in.refinement;
   const double extent = std::max(ConfidenceExtent(*in.target), 1e-12);
   const Eigen::Vector3d centre = in.source->level(0).center_of_mass[0].cast<double>();
-  const double fitness_edge =
-      2.0 * in.target->half_length() / static_cast<double>(uint64_t{1} << refined.fitness_depth);
+  const double fitness_edge = CellEdge(*in.target, refined.fitness_depth);
   f[kFeatureFitness] = refined.fitness;
   f[kFeatureInlierRmseCells] = refined.inlier_rmse / std::max(fitness_edge, 1e-12);
   const double finest_edge =

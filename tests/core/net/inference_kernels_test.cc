@@ -148,6 +148,56 @@ TEST(InferenceKernelsTest, SparseTreeConvHandlesEmptyAndAllEmptyNeighbourhoods) 
                            linear->bias.reshape({1, 8})));
 }
 
+// The rulebook's result against Linear over the gathered rows (zero rows for empty neighbours).
+void ExpectSparseEqualsGathered(const torch::Tensor& features, const torch::Tensor& neighbors,
+                                const torch::Tensor& weight, const torch::Tensor& bias) {
+  torch::NoGradGuard no_grad;
+  torch::Tensor gathered = WithZeroRow(features)
+                               .index_select(0, neighbors.reshape({-1}))
+                               .reshape({neighbors.size(0), weight.size(1)});
+  torch::Tensor expected = torch::matmul(gathered, weight.t());
+  if (bias.defined()) expected += bias;
+  torch::Tensor got = SparseTreeConvLinear(features, neighbors, weight, bias);
+  ASSERT_EQ(got.sizes(), expected.sizes());
+  EXPECT_TRUE(torch::allclose(got, expected, 1e-5, 1e-5));
+}
+
+// One output row: the output must be a tensor of its own, not a view of the bias (expanding a
+// [1, C'] bias to one row and asking for a contiguous tensor returns the bias itself), or the
+// sums would be written into the model.
+TEST(InferenceKernelsTest, SparseTreeConvOfOneRowLeavesTheWeightsUntouched) {
+  if (!SparseTreeConvAvailable()) GTEST_SKIP() << "the loaded BLAS exports no sgemm_";
+  torch::manual_seed(31);
+  torch::nn::Linear linear(27 * 16, 8);
+  const torch::Tensor weight_before = linear->weight.detach().clone();
+  const torch::Tensor bias_before = linear->bias.detach().clone();
+  // A lone node (its centre itself, the direct GEMM) and one coarser row over five inputs.
+  torch::Tensor lone = torch::full({1, 27}, 1, torch::kInt64);
+  lone[0][13] = 0;
+  torch::Tensor coarse = torch::full({1, 27}, 5, torch::kInt64);
+  coarse[0][2] = 0;
+  coarse[0][13] = 3;
+  coarse[0][26] = 4;
+  for (int call = 0; call < 2; ++call) {
+    ExpectSparseEqualsGathered(torch::randn({1, 16}), lone, linear->weight, linear->bias);
+    ExpectSparseEqualsGathered(torch::randn({5, 16}), coarse, linear->weight, linear->bias);
+  }
+  EXPECT_TRUE(torch::equal(linear->weight, weight_before));
+  EXPECT_TRUE(torch::equal(linear->bias, bias_before));
+}
+
+TEST(InferenceKernelsTest, SparseTreeConvTakesACentreThatIsNotSelfAndNoBias) {
+  if (!SparseTreeConvAvailable()) GTEST_SKIP() << "the loaded BLAS exports no sgemm_";
+  torch::manual_seed(37);
+  torch::nn::Linear linear(27 * 32, 24);
+  torch::Tensor features = torch::randn({60, 32});
+  // Every centre present but pointing at another row: the gathered path, not the direct GEMM.
+  torch::Tensor neighbors = IndicesWithEmpty(60, 60, 27, 41);
+  neighbors.index_put_({torch::indexing::Slice(), 13}, torch::randperm(60).roll(1));
+  ExpectSparseEqualsGathered(features, neighbors, linear->weight, linear->bias);
+  ExpectSparseEqualsGathered(features, neighbors, linear->weight, torch::Tensor());
+}
+
 TEST(InferenceKernelsTest, SparseTreeConvRejectsIndicesAndShapesItCannotUse) {
   if (!SparseTreeConvAvailable()) GTEST_SKIP() << "the loaded BLAS exports no sgemm_";
   torch::NoGradGuard no_grad;
@@ -158,6 +208,10 @@ TEST(InferenceKernelsTest, SparseTreeConvRejectsIndicesAndShapesItCannotUse) {
   EXPECT_THROW(SparseTreeConvLinear(features, neighbors, linear->weight, linear->bias), c10::Error);
   neighbors[1][4] = -1;
   EXPECT_THROW(SparseTreeConvLinear(features, neighbors, linear->weight, linear->bias), c10::Error);
+  EXPECT_THROW(
+      SparseTreeConvLinear(features.to(torch::kFloat64), torch::full({2, 27}, 10, torch::kInt64),
+                           linear->weight, linear->bias),
+      c10::Error);
   torch::Tensor narrower = torch::randn({10, 8});
   EXPECT_THROW(SparseTreeConvLinear(narrower, torch::full({2, 27}, 10, torch::kInt64),
                                     linear->weight, linear->bias),
@@ -183,8 +237,24 @@ TEST(InferenceKernelsTest, TreeConvolutionAndPoolingMatchTheTrainingPath) {
       torch::InferenceMode inference;
       fast = PoolToParents(conv->forward(features, neighbors), slots);
     }
-    EXPECT_TRUE(torch::allclose(fast, slow.detach(), 1e-5, 1e-5)) << "channels " << channels;
+    // The gathered GEMM is the training path's own operator; the rulebook sums in another order.
+    const double tolerance = channels < 16 ? 1e-6 : 1e-5;
+    EXPECT_TRUE(torch::allclose(fast, slow.detach(), tolerance, tolerance))
+        << "channels " << channels;
   }
+}
+
+// Features without a gradient (an input, or a frozen earlier layer) still train a convolution
+// whose weights want one: the rulebook, which computes no gradient, is not taken then.
+TEST(InferenceKernelsTest, WeightsThatWantAGradientKeepTheDifferentiablePath) {
+  torch::manual_seed(43);
+  TreeConv conv(32, 16);
+  torch::Tensor features = torch::randn({200, 32});  // no gradient of its own
+  torch::Tensor neighbors = WithSelfAtCentre(IndicesWithEmpty(200, 200, 27, 47));
+  conv->forward(features, neighbors).sum().backward();
+  const torch::Tensor grad = conv->named_parameters()["linear.weight"].grad();
+  ASSERT_TRUE(grad.defined());
+  EXPECT_GT(grad.abs().sum().item<float>(), 0.0f);
 }
 
 }  // namespace
