@@ -138,6 +138,35 @@ TEST(RpsrNetTest, EncodedTargetGivesTheSameEstimates) {
   EXPECT_EQ((*net)->Estimate({&wrong_net, 1}).status().code(), absl::StatusCode::kInvalidArgument);
 }
 
+// A cloud of one point (one node a depth) goes through every layer with a single row; no layer
+// may write into the network's parameters then (the rulebook convolution once summed into a
+// view of its bias with one output row): the next pair's estimate is the same to every bit.
+TEST(RpsrNetTest, OneNodeCloudsLeaveTheNetworkUnchanged) {
+  RpsrNetConfig config = SmallConfig();  // depth 3 convolves 16 channels: the rulebook's path
+  auto net = RpsrNet::Create(config, 8);
+  ASSERT_TRUE(net.ok());
+  auto source = BuildOctree(testing::AsymmetricObject(900, 50));
+  auto target = BuildOctree(testing::AsymmetricObject(900, 51));
+  PointCloud one;
+  one.points.push_back(Eigen::Vector3f(0.1f, -0.2f, 0.3f));
+  auto lone = BuildOctree(one);
+  ASSERT_TRUE(source.ok() && target.ok() && lone.ok());
+  const NetPair pair{&*source, &*target, testing::SmallMotion(0.1, {0.05, 0, 0})};
+  auto before = (*net)->Estimate({&pair, 1}, 2);
+  ASSERT_TRUE(before.ok()) << before.status();
+  const NetPair lone_pair{&*lone, &*lone};
+  for (int i = 0; i < 3; ++i) {
+    auto lone_estimate = (*net)->Estimate({&lone_pair, 1}, 2);
+    auto encoding = (*net)->EncodeTarget(*lone);
+    ASSERT_TRUE(lone_estimate.ok()) << lone_estimate.status();
+    ASSERT_TRUE(encoding.ok()) << encoding.status();
+  }
+  auto after = (*net)->Estimate({&pair, 1}, 2);
+  ASSERT_TRUE(after.ok()) << after.status();
+  EXPECT_EQ((*before)[0].T_target_source.matrix(), (*after)[0].T_target_source.matrix());
+  EXPECT_EQ((*before)[0].score_peak, (*after)[0].score_peak);
+}
+
 TEST(RpsrNetTest, BatchedPassEqualsOneByOneBeforeTheSvd) {
   net::RpsrNetwork network(SmallConfig());
   network->eval();
