@@ -32,15 +32,26 @@ torch::Tensor GatherRowsOrZero(const torch::Tensor& features, const torch::Tenso
   const int64_t* idx = index.data_ptr<int64_t>();
   float* dst = out.data_ptr<float>();
   const size_t row_bytes = static_cast<size_t>(channels) * sizeof(float);
+  // Rows of a few floats (the depth-5 inputs: 6 positions, 1 density) are copied by a loop: a
+  // memset or memcpy call per row of 4-24 bytes cost more than the copy.
+  constexpr int64_t kShortRow = 8;
   at::parallel_for(0, count, 2048, [&](int64_t begin, int64_t end) {
     for (int64_t i = begin; i < end; ++i) {
       const int64_t k = idx[i];
       float* row = dst + i * channels;
       if (k == rows) {
-        std::memset(row, 0, row_bytes);
+        if (channels <= kShortRow) {
+          for (int64_t c = 0; c < channels; ++c) row[c] = 0.0f;
+        } else {
+          std::memset(row, 0, row_bytes);
+        }
       } else {
         TORCH_CHECK(k >= 0 && k < rows, "gather index ", k, " outside [0, ", rows, "]");
-        std::memcpy(row, in + k * channels, row_bytes);
+        if (channels <= kShortRow) {
+          for (int64_t c = 0; c < channels; ++c) row[c] = in[k * channels + c];
+        } else {
+          std::memcpy(row, in + k * channels, row_bytes);
+        }
       }
     }
   });

@@ -15,13 +15,10 @@ namespace {
 constexpr int64_t kSparseConvMinChannels = 16;
 
 // Copies `values` into a [rows, cols] int64 tensor, adding `offset` to valid indices and
-// mapping -1 to `empty`.
-void AppendIndices(const std::vector<int32_t>& values, int64_t offset, int64_t* out) {
-  for (size_t i = 0; i < values.size(); ++i) out[i] = values[i] < 0 ? -1 : values[i] + offset;
-}
-
-torch::Tensor ReplaceEmpty(torch::Tensor indices, int64_t empty) {
-  return torch::where(indices < 0, torch::full_like(indices, empty), indices);
+// mapping -1 (no node) to `empty`, the row past the last node (a zero row in the gathers).
+void AppendIndices(const std::vector<int32_t>& values, int64_t offset, int64_t empty,
+                   int64_t* out) {
+  for (size_t i = 0; i < values.size(); ++i) out[i] = values[i] < 0 ? empty : values[i] + offset;
 }
 
 torch::Tensor WithZeroRow(const torch::Tensor& features) {
@@ -59,15 +56,16 @@ PackedClouds PackClouds(const std::vector<const NetCloudInput*>& clouds) {
       std::copy(in.density.begin(), in.density.end(),
                 density.data_ptr<float>() + start * kNetDensityFeatures);
       if (has_neighbors)
-        AppendIndices(in.neighbors, start, neighbors.data_ptr<int64_t>() + start * 27);
+        AppendIndices(in.neighbors, start, totals[d], neighbors.data_ptr<int64_t>() + start * 27);
       if (has_children) {
-        AppendIndices(in.child_slots, offsets[d + 1][b], children.data_ptr<int64_t>() + start * 8);
+        AppendIndices(in.child_slots, offsets[d + 1][b], totals[d + 1],
+                      children.data_ptr<int64_t>() + start * 8);
       }
     }
     packed.position[d] = position;
     packed.density[d] = density;
-    packed.neighbors[d] = has_neighbors ? ReplaceEmpty(neighbors, totals[d]) : neighbors;
-    packed.child_slots[d] = has_children ? ReplaceEmpty(children, totals[d + 1]) : children;
+    packed.neighbors[d] = neighbors;
+    packed.child_slots[d] = children;
   }
   torch::Tensor token_node = torch::empty({batch, kNetTokens}, i64);
   torch::Tensor token_com = torch::empty({batch, kNetTokens, 3}, f32);
