@@ -88,8 +88,72 @@ void MultiplyByOffsetBlock(const float* a, int64_t rows, int64_t channels, const
 
 bool SparseTreeConvAvailable() { return Sgemm() != nullptr; }
 
+namespace {
+
+// The rulebook convolution of the output rows [begin, end) of one cloud, whose neighbours lie in
+// the input rows [in_begin, in_end) (`empty` marks an empty neighbour), added into `dst`, which
+// holds the bias. The GEMMs see this cloud's rows only, so that a cloud's result does not depend
+// on the others in its batch (BLAS picks its kernels by the matrices' sizes).
+void ConvolveSegment(const float* in, const int64_t* idx, int64_t begin, int64_t end,
+                     int64_t in_begin, int64_t in_end, int64_t empty, int64_t channels,
+                     const float* wp, int64_t width, float* dst) {
+  const int64_t rows = end - begin;
+  // The rulebook: for each of the 27 offsets, the (output row, input row) pairs whose neighbour
+  // is present, laid out offset after offset (a counting sort), in rows of this segment.
+  std::array<int64_t, 28> start{};
+  for (int64_t i = begin * 27; i < end * 27; ++i) start[i % 27 + 1] += idx[i] != empty;
+  for (int k = 0; k < 27; ++k) start[k + 1] += start[k];
+  std::vector<int32_t> pair_out(start[27]), pair_in(start[27]);
+  std::array<int64_t, 27> next;
+  std::copy(start.begin(), start.begin() + 27, next.begin());
+  bool centre_is_self = rows == in_end - in_begin;
+  for (int64_t i = begin; i < end; ++i) {
+    for (int k = 0; k < 27; ++k) {
+      const int64_t j = idx[i * 27 + k];
+      if (j == empty) {
+        if (k == 13) centre_is_self = false;
+        continue;
+      }
+      TORCH_CHECK(j >= in_begin && j < in_end, "neighbour index ", j, " outside its cloud's rows [",
+                  in_begin, ", ", in_end, ")");
+      if (k == 13 && j - in_begin != i - begin) centre_is_self = false;
+      pair_out[next[k]] = static_cast<int32_t>(i - begin);
+      pair_in[next[k]++] = static_cast<int32_t>(j - in_begin);
+    }
+  }
+  const float* seg_in = in + in_begin * channels;
+  float* seg_out = dst + begin * width;
+  // The centre offset of a same-depth convolution is each node itself: one GEMM straight into
+  // the output, with no gather and no scatter.
+  if (centre_is_self && rows > 0) {
+    MultiplyByOffsetBlock(seg_in, rows, channels, wp, 13, width, 1.0f, seg_out);
+  }
+  std::vector<float> gathered, product;
+  for (int k = 0; k < 27; ++k) {
+    const int64_t n = start[k + 1] - start[k];
+    if (n == 0 || (k == 13 && centre_is_self)) continue;
+    const int32_t* out_rows = pair_out.data() + start[k];
+    const int32_t* in_rows = pair_in.data() + start[k];
+    gathered.resize(n * channels);
+    product.resize(n * width);
+    for (int64_t r = 0; r < n; ++r) {
+      std::memcpy(gathered.data() + r * channels,
+                  seg_in + static_cast<int64_t>(in_rows[r]) * channels, channels * sizeof(float));
+    }
+    MultiplyByOffsetBlock(gathered.data(), n, channels, wp, k, width, 0.0f, product.data());
+    for (int64_t r = 0; r < n; ++r) {
+      float* o = seg_out + static_cast<int64_t>(out_rows[r]) * width;
+      const float* v = product.data() + r * width;
+      for (int64_t c = 0; c < width; ++c) o[c] += v[c];
+    }
+  }
+}
+
+}  // namespace
+
 torch::Tensor SparseTreeConvLinear(const torch::Tensor& features, const torch::Tensor& neighbors,
-                                   const torch::Tensor& weight, const torch::Tensor& bias) {
+                                   const torch::Tensor& weight, const torch::Tensor& bias,
+                                   const std::vector<int64_t>& segments) {
   TORCH_CHECK(SparseTreeConvAvailable(), "no sgemm_ in the loaded BLAS");
   const torch::Tensor x = features.contiguous();
   const torch::Tensor nbr = neighbors.contiguous().to(torch::kInt64);
@@ -108,6 +172,14 @@ torch::Tensor SparseTreeConvLinear(const torch::Tensor& features, const torch::T
   TORCH_CHECK(
       rows_in <= kIntMax && rows_out <= kIntMax && 27 * channels <= kIntMax && width <= kIntMax,
       "tree convolution too large for BLAS's int sizes");
+  // Segments: one cloud's rows each (same rows in and out); none given: one segment, which may
+  // have fewer output rows than input rows.
+  std::vector<int64_t> bounds = segments;
+  if (bounds.empty()) bounds = {0, rows_out};
+  TORCH_CHECK(bounds.front() == 0 && bounds.back() == rows_out &&
+                  std::is_sorted(bounds.begin(), bounds.end()) &&
+                  (bounds.size() == 2 || rows_in == rows_out),
+              "segments must run from 0 to the output rows, ascending, over same-depth rows");
   // A fresh tensor, never a view: with one row, expand(...).contiguous() would hand back the
   // bias's own storage, and the sums below would write into the model.
   torch::Tensor out = torch::zeros({rows_out, width}, x.options());
@@ -123,50 +195,13 @@ torch::Tensor SparseTreeConvLinear(const torch::Tensor& features, const torch::T
   const float* in = x.data_ptr<float>();
   const float* wp = w.data_ptr<float>();
   float* dst = out.data_ptr<float>();
-
-  // The rulebook: for each of the 27 offsets, the (output row, input row) pairs whose neighbour
-  // is present, laid out offset after offset (a counting sort).
-  std::array<int64_t, 28> start{};
-  for (int64_t i = 0; i < rows_out * 27; ++i) start[i % 27 + 1] += idx[i] != rows_in;
-  for (int k = 0; k < 27; ++k) start[k + 1] += start[k];
-  std::vector<int32_t> pair_out(start[27]), pair_in(start[27]);
-  std::array<int64_t, 27> next;
-  std::copy(start.begin(), start.begin() + 27, next.begin());
-  for (int64_t i = 0; i < rows_out; ++i) {
-    for (int k = 0; k < 27; ++k) {
-      const int64_t j = idx[i * 27 + k];
-      if (j == rows_in) continue;
-      TORCH_CHECK(j >= 0 && j < rows_in, "neighbour index ", j, " outside [0, ", rows_in, "]");
-      pair_out[next[k]] = static_cast<int32_t>(i);
-      pair_in[next[k]++] = static_cast<int32_t>(j);
-    }
+  if (bounds.size() == 2) {  // one segment: every input row
+    ConvolveSegment(in, idx, 0, rows_out, 0, rows_in, rows_in, channels, wp, width, dst);
+    return out;
   }
-
-  // The centre offset of a same-depth convolution is each node itself: one GEMM straight into
-  // the output, with no gather and no scatter.
-  bool centre_is_self = rows_in == rows_out && start[14] - start[13] == rows_out;
-  for (int64_t i = 0; centre_is_self && i < rows_out; ++i) centre_is_self = idx[i * 27 + 13] == i;
-  if (centre_is_self && rows_out > 0) {
-    MultiplyByOffsetBlock(in, rows_out, channels, wp, 13, width, 1.0f, dst);
-  }
-  std::vector<float> gathered, product;
-  for (int k = 0; k < 27; ++k) {
-    const int64_t n = start[k + 1] - start[k];
-    if (n == 0 || (k == 13 && centre_is_self)) continue;
-    const int32_t* out_rows = pair_out.data() + start[k];
-    const int32_t* in_rows = pair_in.data() + start[k];
-    gathered.resize(n * channels);
-    product.resize(n * width);
-    for (int64_t r = 0; r < n; ++r) {
-      std::memcpy(gathered.data() + r * channels, in + static_cast<int64_t>(in_rows[r]) * channels,
-                  channels * sizeof(float));
-    }
-    MultiplyByOffsetBlock(gathered.data(), n, channels, wp, k, width, 0.0f, product.data());
-    for (int64_t r = 0; r < n; ++r) {
-      float* o = dst + static_cast<int64_t>(out_rows[r]) * width;
-      const float* v = product.data() + r * width;
-      for (int64_t c = 0; c < width; ++c) o[c] += v[c];
-    }
+  for (size_t s = 0; s + 1 < bounds.size(); ++s) {
+    ConvolveSegment(in, idx, bounds[s], bounds[s + 1], bounds[s], bounds[s + 1], rows_in, channels,
+                    wp, width, dst);
   }
   return out;
 }

@@ -16,6 +16,7 @@
 #include <torch/torch.h>
 
 #include <utility>
+#include <vector>
 
 namespace rpsr::core::net {
 
@@ -34,8 +35,12 @@ torch::Tensor GatherRowsOrZero(const torch::Tensor& features, const torch::Tenso
 // them; returns [M, C']. The same sums as Linear over the gathered rows, in another order
 // (equal within float rounding). Why: a tree's 3x3x3 neighbourhoods are about half empty (an
 // object's depths 3 and 4 hold 13-14 of the 27), so half of the gathered GEMM multiplies zeros.
+// `segments`: the first row of each cloud of a batch and the row count at the end (same-depth
+// rows, neighbours within their cloud), so that each cloud is convolved on its own rows and its
+// result is the same whatever else is in the batch (BLAS chooses kernels by size); empty: one.
 torch::Tensor SparseTreeConvLinear(const torch::Tensor& features, const torch::Tensor& neighbors,
-                                   const torch::Tensor& weight, const torch::Tensor& bias);
+                                   const torch::Tensor& weight, const torch::Tensor& bias,
+                                   const std::vector<int64_t>& segments = {});
 
 // False when the loaded BLAS exports no Fortran sgemm_ (SparseTreeConvLinear then throws).
 bool SparseTreeConvAvailable();

@@ -62,6 +62,8 @@ PackedClouds PackClouds(const std::vector<const NetCloudInput*>& clouds) {
                       children.data_ptr<int64_t>() + start * 8);
       }
     }
+    packed.row_offsets[d] = offsets[d];
+    packed.row_offsets[d].push_back(totals[d]);
     packed.position[d] = position;
     packed.density[d] = density;
     packed.neighbors[d] = neighbors;
@@ -108,13 +110,14 @@ TreeConvImpl::TreeConvImpl(int64_t in_channels, int64_t out_channels) : in_chann
   norm_ = register_module("norm", torch::nn::BatchNorm1d(out_channels));
 }
 
-torch::Tensor TreeConvImpl::forward(const torch::Tensor& features, const torch::Tensor& neighbors) {
+torch::Tensor TreeConvImpl::forward(const torch::Tensor& features, const torch::Tensor& neighbors,
+                                    const std::vector<int64_t>& row_offsets) {
   // The rulebook computes no gradient: the weights must not want one either (features without
   // a gradient can meet weights that have one, e.g. when an earlier layer is frozen).
   if (UseInferenceKernels(features) && UseInferenceKernels(linear_->weight) &&
       in_channels_ >= kSparseConvMinChannels && SparseTreeConvAvailable()) {
-    return torch::relu(
-        norm_->forward(SparseTreeConvLinear(features, neighbors, linear_->weight, linear_->bias)));
+    return torch::relu(norm_->forward(
+        SparseTreeConvLinear(features, neighbors, linear_->weight, linear_->bias, row_offsets)));
   }
   const int64_t rows = neighbors.size(0);
   torch::Tensor gathered = UseInferenceKernels(features)
@@ -149,7 +152,7 @@ torch::Tensor FeatureBranchImpl::forward(const PackedClouds& clouds, bool positi
   torch::Tensor x = positions ? clouds.position[3] : clouds.density[3];
   for (int i = 0; i < 3; ++i) {
     const int d = 3 - i;
-    x = convs_[i]->forward(x, clouds.neighbors[d]);
+    x = convs_[i]->forward(x, clouds.neighbors[d], clouds.row_offsets[d]);
     x = PoolToParents(x, clouds.child_slots[d - 1]);
   }
   return x;  // depth-2 nodes

@@ -24,10 +24,12 @@ struct PackedClouds {
   std::array<torch::Tensor, kNetDepths> density;      // [N_d, 1] float
   std::array<torch::Tensor, kNetDepths> neighbors;    // [N_d, 27] int64 (depths 3..5)
   std::array<torch::Tensor, kNetDepths> child_slots;  // [N_d, 8] int64 into depth + 1 (2..4)
-  torch::Tensor token_node;                           // [B, T] int64 into depth 2
-  torch::Tensor token_com;                            // [B, T, 3] float
-  torch::Tensor token_weight;                         // [B, T] float
-  torch::Tensor token_empty;                          // [B, T] bool
+  // Per depth, each cloud's first row and N_d at the end (B + 1 values).
+  std::array<std::vector<int64_t>, kNetDepths> row_offsets;
+  torch::Tensor token_node;    // [B, T] int64 into depth 2
+  torch::Tensor token_com;     // [B, T, 3] float
+  torch::Tensor token_weight;  // [B, T] float
+  torch::Tensor token_empty;   // [B, T] bool
 
   PackedClouds To(const torch::Device& device) const;
 };
@@ -41,7 +43,10 @@ PackedClouds PackClouds(const std::vector<const NetCloudInput*>& clouds);
 class TreeConvImpl : public torch::nn::Module {
  public:
   TreeConvImpl(int64_t in_channels, int64_t out_channels);
-  torch::Tensor forward(const torch::Tensor& features, const torch::Tensor& neighbors);
+  // `row_offsets`: each cloud's first row and the row count (PackedClouds::row_offsets), so that
+  // at inference each cloud is convolved on its own rows; empty: one cloud.
+  torch::Tensor forward(const torch::Tensor& features, const torch::Tensor& neighbors,
+                        const std::vector<int64_t>& row_offsets = {});
 
  private:
   int64_t in_channels_;

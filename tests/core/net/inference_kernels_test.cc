@@ -198,6 +198,42 @@ TEST(InferenceKernelsTest, SparseTreeConvTakesACentreThatIsNotSelfAndNoBias) {
   ExpectSparseEqualsGathered(features, neighbors, linear->weight, torch::Tensor());
 }
 
+// A batch of clouds convolved segment by segment gives each cloud what it gets alone, to every
+// bit, and a neighbour in another cloud's rows is refused.
+TEST(InferenceKernelsTest, SparseTreeConvBySegmentsEqualsEachCloudAlone) {
+  if (!SparseTreeConvAvailable()) GTEST_SKIP() << "the loaded BLAS exports no sgemm_";
+  torch::NoGradGuard no_grad;
+  torch::manual_seed(53);
+  torch::nn::Linear linear(27 * 32, 64);
+  const std::vector<int64_t> sizes = {5, 300, 40};
+  std::vector<torch::Tensor> features, neighbors;
+  std::vector<int64_t> offsets = {0};
+  for (size_t b = 0; b < sizes.size(); ++b) {
+    features.push_back(torch::randn({sizes[b], 32}));
+    neighbors.push_back(WithSelfAtCentre(IndicesWithEmpty(sizes[b], sizes[b], 27, 59 + b)));
+    offsets.push_back(offsets.back() + sizes[b]);
+  }
+  const int64_t total = offsets.back();
+  std::vector<torch::Tensor> shifted;
+  for (size_t b = 0; b < sizes.size(); ++b) {
+    torch::Tensor n = neighbors[b];
+    shifted.push_back(torch::where(n == sizes[b], torch::full_like(n, total), n + offsets[b]));
+  }
+  const torch::Tensor all = torch::cat(shifted);
+  const torch::Tensor batched =
+      SparseTreeConvLinear(torch::cat(features), all, linear->weight, linear->bias, offsets);
+  for (size_t b = 0; b < sizes.size(); ++b) {
+    const torch::Tensor alone =
+        SparseTreeConvLinear(features[b], neighbors[b], linear->weight, linear->bias);
+    EXPECT_TRUE(torch::equal(batched.narrow(0, offsets[b], sizes[b]), alone)) << "cloud " << b;
+  }
+  torch::Tensor crossing = all.clone();
+  crossing[0][0] = offsets[1];  // the first cloud's node pointing into the second cloud
+  EXPECT_THROW(
+      SparseTreeConvLinear(torch::cat(features), crossing, linear->weight, linear->bias, offsets),
+      c10::Error);
+}
+
 TEST(InferenceKernelsTest, SparseTreeConvRejectsIndicesAndShapesItCannotUse) {
   if (!SparseTreeConvAvailable()) GTEST_SKIP() << "the loaded BLAS exports no sgemm_";
   torch::NoGradGuard no_grad;
