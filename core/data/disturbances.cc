@@ -99,6 +99,11 @@ std::string DisturbanceName(DisturbanceKind kind) {
   return "unknown";
 }
 
+bool IsFractionDisturbance(DisturbanceKind kind) {
+  return kind == DisturbanceKind::kGaussianNoise || kind == DisturbanceKind::kUniformOutliers ||
+         kind == DisturbanceKind::kCrop || kind == DisturbanceKind::kPartialViews;
+}
+
 absl::StatusOr<double> DisturbanceMagnitudeAtLevel(DisturbanceKind kind, int level) {
   if (level < 0 || level >= kNumDisturbanceLevels) {
     return absl::InvalidArgumentError(
@@ -128,10 +133,7 @@ size_t AffectedPointCount(size_t num_points, double fraction) {
 
 absl::StatusOr<AppliedDisturbance> ApplyDisturbance(DisturbanceKind kind, double magnitude,
                                                     uint64_t seed, PointCloud& cloud) {
-  const bool is_fraction = kind == DisturbanceKind::kGaussianNoise ||
-                           kind == DisturbanceKind::kUniformOutliers ||
-                           kind == DisturbanceKind::kCrop || kind == DisturbanceKind::kPartialViews;
-  if (is_fraction && !(magnitude >= 0.0 && magnitude <= 1.0)) {
+  if (IsFractionDisturbance(kind) && !(magnitude >= 0.0 && magnitude <= 1.0)) {
     return absl::InvalidArgumentError(
         absl::StrCat(DisturbanceName(kind), " fraction ", magnitude, " outside [0, 1]"));
   }

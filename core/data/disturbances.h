@@ -41,6 +41,10 @@ enum class DisturbanceKind {
 // "none", "gaussian_noise", "uniform_outliers", "crop", "jitter", "partial_views".
 std::string DisturbanceName(DisturbanceKind kind);
 
+// Whether `kind`'s magnitude is a fraction of the points (noise, outliers, crop, partial views),
+// which must lie in [0, 1]; jitter's is a distance.
+bool IsFractionDisturbance(DisturbanceKind kind);
+
 inline constexpr int kNumDisturbanceLevels = 5;
 inline constexpr double kGaussianNoiseSigma = 0.02;
 inline constexpr double kOutlierHalfExtent = 1.0;

@@ -133,11 +133,8 @@ absl::Status ValidatePairOptions(const PairOptions& options) {
       return absl::InvalidArgumentError(
           absl::StrCat("disturbance_magnitude ", magnitude, " is not finite and >= 0"));
     }
-    const bool is_fraction = options.random_disturbance ||
-                             options.disturbance == DisturbanceKind::kGaussianNoise ||
-                             options.disturbance == DisturbanceKind::kUniformOutliers ||
-                             options.disturbance == DisturbanceKind::kCrop ||
-                             options.disturbance == DisturbanceKind::kPartialViews;
+    const bool is_fraction =
+        options.random_disturbance || IsFractionDisturbance(options.disturbance);
     if (is_fraction && magnitude > 1.0) {
       return absl::InvalidArgumentError(
           absl::StrCat("disturbance fraction ", magnitude, " outside [0, 1]"));

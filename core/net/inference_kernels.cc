@@ -195,13 +195,12 @@ torch::Tensor SparseTreeConvLinear(const torch::Tensor& features, const torch::T
   const float* in = x.data_ptr<float>();
   const float* wp = w.data_ptr<float>();
   float* dst = out.data_ptr<float>();
-  if (bounds.size() == 2) {  // one segment: every input row
-    ConvolveSegment(in, idx, 0, rows_out, 0, rows_in, rows_in, channels, wp, width, dst);
-    return out;
-  }
+  // One segment reads every input row (which may be more than its output rows); a batch's
+  // segments read their own rows.
+  const bool whole = bounds.size() == 2;
   for (size_t s = 0; s + 1 < bounds.size(); ++s) {
-    ConvolveSegment(in, idx, bounds[s], bounds[s + 1], bounds[s], bounds[s + 1], rows_in, channels,
-                    wp, width, dst);
+    ConvolveSegment(in, idx, bounds[s], bounds[s + 1], whole ? 0 : bounds[s],
+                    whole ? rows_in : bounds[s + 1], rows_in, channels, wp, width, dst);
   }
   return out;
 }

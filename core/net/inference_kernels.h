@@ -33,8 +33,9 @@ torch::Tensor GatherRowsOrZero(const torch::Tensor& features, const torch::Tenso
 // sparse convolution libraries do). features [N, C] float, neighbors [M, 27] int64 with N for an
 // empty neighbour, weight [C', 27 C] and bias [C'] (or undefined) as torch::nn::Linear holds
 // them; returns [M, C']. The same sums as Linear over the gathered rows, in another order
-// (equal within float rounding). Why: a tree's 3x3x3 neighbourhoods are about half empty (an
-// object's depths 3 and 4 hold 13-14 of the 27), so half of the gathered GEMM multiplies zeros.
+// (equal within float rounding). Why: about half of a tree's neighbour slots are empty (an
+// object's nodes have 14 of 27 present at depth 4, 8.5-13 at depth 3), so half of the gathered
+// GEMM multiplies zeros.
 // `segments`: the first row of each cloud of a batch and the row count at the end (same-depth
 // rows, neighbours within their cloud), so that each cloud is convolved on its own rows and its
 // result is the same whatever else is in the batch (BLAS chooses kernels by size); empty: one.

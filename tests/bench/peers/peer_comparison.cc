@@ -131,8 +131,7 @@ ABSL_FLAG(std::string, settings, "",
 ABSL_FLAG(std::string, levels, "",
           "objects: comma-separated disturbance levels 0..4 run for each disturbance (noise, "
           "outliers: 1,5,10,20,40% of the points; crop and partial 1,10,20,30,40%; jitter "
-          "0.01,0.02,0.03,0.05,"
-          "0.08); default: the 20% set (noise, outliers 3, crop, jitter 2)");
+          "0.01,0.02,0.03,0.05,0.08); default: the 20% set (noise, outliers 3, crop, jitter 2)");
 ABSL_FLAG(int, lidar_pairs, 20, "lidar: pairs per setting (spread over the sequences)");
 ABSL_FLAG(std::string, kitti, "",
           "lidar: a KITTI odometry root (real or `rpsr data lidar`); default: simulate "

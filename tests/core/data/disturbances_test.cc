@@ -172,6 +172,10 @@ TEST(DisturbancesTest, RejectsBadMagnitudes) {
   EXPECT_FALSE(ApplyDisturbance(DisturbanceKind::kJitter, -0.1, 0, cloud).ok());
   EXPECT_FALSE(ApplyDisturbance(DisturbanceKind::kJitter, NAN, 0, cloud).ok());
   EXPECT_EQ(cloud.size(), 10u);
+  // Jitter's magnitude is a distance, so more than 1 is allowed.
+  EXPECT_FALSE(IsFractionDisturbance(DisturbanceKind::kJitter));
+  EXPECT_TRUE(ApplyDisturbance(DisturbanceKind::kJitter, 1.5, 0, cloud).ok());
+  EXPECT_TRUE(IsFractionDisturbance(DisturbanceKind::kUniformOutliers));
 }
 
 }  // namespace
