@@ -27,7 +27,8 @@ torch::Tensor WithZeroRow(const torch::Tensor& f) {
 }
 
 TEST(InferenceKernelsTest, GatherEqualsIndexSelectWithAZeroRow) {
-  for (int64_t channels : {1, 6, 32, 128}) {
+  // Every row width with its own fixed-size copy (1-8 floats), the first one without, and wide.
+  for (int64_t channels : {1, 2, 3, 4, 5, 6, 7, 8, 9, 32, 128}) {
     torch::Tensor features = torch::randn({300, channels});
     torch::Tensor idx = IndicesWithEmpty(200, 300, 27, 7 + channels);
     torch::Tensor expected = WithZeroRow(features).index_select(0, idx.reshape({-1}));
@@ -41,6 +42,10 @@ TEST(InferenceKernelsTest, GatherRejectsIndicesOutsideTheRows) {
   torch::Tensor features = torch::randn({10, 4});
   EXPECT_THROW(GatherRowsOrZero(features, torch::tensor({0, 11}, torch::kInt64)), c10::Error);
   EXPECT_THROW(GatherRowsOrZero(features, torch::tensor({-1}, torch::kInt64)), c10::Error);
+  // The fixed-size copies of short rows check their indices too.
+  torch::Tensor narrow = torch::randn({10, 6});
+  EXPECT_THROW(GatherRowsOrZero(narrow, torch::tensor({0, 11}, torch::kInt64)), c10::Error);
+  EXPECT_THROW(GatherRowsOrZero(narrow, torch::tensor({-1}, torch::kInt64)), c10::Error);
 }
 
 TEST(InferenceKernelsTest, MaxOverSlotsEqualsTheGenericPoolingOfReluOutputs) {
