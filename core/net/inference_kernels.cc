@@ -29,8 +29,8 @@ namespace {
 // bytes (loop-idiom recognition), which cost the depth-5 gather more than the copies (the
 // empty-neighbour memsets alone were 1.5% of an object pair's network time).
 template <int kChannels>
-void GatherShortRows(const float* in, const int64_t* idx, int64_t rows, int64_t begin,
-                     int64_t end, float* dst) {
+void GatherShortRows(const float* in, const int64_t* idx, int64_t rows, int64_t begin, int64_t end,
+                     float* dst) {
   for (int64_t i = begin; i < end; ++i) {
     const int64_t k = idx[i];
     float* row = dst + i * kChannels;
@@ -48,16 +48,15 @@ using GatherFunction = void (*)(const float*, const int64_t*, int64_t, int64_t, 
 // GatherShortRows for 1 to kShortRow channels; null for wider rows.
 constexpr int kShortRow = 8;
 GatherFunction ShortRowGather(int64_t channels) {
-  static constexpr std::array<GatherFunction, kShortRow + 1> kByWidth = {
-      nullptr,
-      &GatherShortRows<1>,
-      &GatherShortRows<2>,
-      &GatherShortRows<3>,
-      &GatherShortRows<4>,
-      &GatherShortRows<5>,
-      &GatherShortRows<6>,
-      &GatherShortRows<7>,
-      &GatherShortRows<8>};
+  static constexpr std::array<GatherFunction, kShortRow + 1> kByWidth = {nullptr,
+                                                                         &GatherShortRows<1>,
+                                                                         &GatherShortRows<2>,
+                                                                         &GatherShortRows<3>,
+                                                                         &GatherShortRows<4>,
+                                                                         &GatherShortRows<5>,
+                                                                         &GatherShortRows<6>,
+                                                                         &GatherShortRows<7>,
+                                                                         &GatherShortRows<8>};
   return channels >= 1 && channels <= kShortRow ? kByWidth[channels] : nullptr;
 }
 
