@@ -15,6 +15,7 @@
 
 #include <torch/torch.h>
 
+#include <mutex>
 #include <utility>
 #include <vector>
 
@@ -39,9 +40,33 @@ torch::Tensor GatherRowsOrZero(const torch::Tensor& features, const torch::Tenso
 // `segments`: the first row of each cloud of a batch and the row count at the end (same-depth
 // rows, neighbours within their cloud), so that each cloud is convolved on its own rows and its
 // result is the same whatever else is in the batch (BLAS chooses kernels by size); empty: one.
+// `weight_by_offset`: weight.t().contiguous() ([27 C, C']), which a caller keeps between calls
+// (TransposedWeightCache): each offset's block is then a plain matrix, which OpenBLAS packs in
+// 0.6-0.7x the time of the transposed block it reads otherwise (the same products); undefined:
+// `weight` is read as it is.
 torch::Tensor SparseTreeConvLinear(const torch::Tensor& features, const torch::Tensor& neighbors,
                                    const torch::Tensor& weight, const torch::Tensor& bias,
-                                   const std::vector<int64_t>& segments = {});
+                                   const std::vector<int64_t>& segments = {},
+                                   const torch::Tensor& weight_by_offset = {});
+
+// weight.t().contiguous() for SparseTreeConvLinear, kept while the weight is unchanged: the same
+// storage and version counter (every in-place write, a loaded state or an optimiser's step, bumps
+// it). Safe for concurrent callers (the registrar's workers share one model); a copy (a cloned
+// module) starts empty. A weight made under InferenceMode (no version counter) is transposed at
+// every call.
+class TransposedWeightCache {
+ public:
+  TransposedWeightCache() = default;
+  TransposedWeightCache(const TransposedWeightCache&) {}
+  TransposedWeightCache& operator=(const TransposedWeightCache&) { return *this; }
+  torch::Tensor Of(const torch::Tensor& weight);
+
+ private:
+  std::mutex mutex_;
+  torch::Tensor transposed_;
+  const void* storage_ = nullptr;
+  int64_t version_ = -1;
+};
 
 // False when the loaded BLAS exports no Fortran sgemm_ (SparseTreeConvLinear then throws).
 bool SparseTreeConvAvailable();

@@ -116,8 +116,9 @@ torch::Tensor TreeConvImpl::forward(const torch::Tensor& features, const torch::
   // a gradient can meet weights that have one, e.g. when an earlier layer is frozen).
   if (UseInferenceKernels(features) && UseInferenceKernels(linear_->weight) &&
       in_channels_ >= kSparseConvMinChannels && SparseTreeConvAvailable()) {
-    return torch::relu(norm_->forward(
-        SparseTreeConvLinear(features, neighbors, linear_->weight, linear_->bias, row_offsets)));
+    return torch::relu(
+        norm_->forward(SparseTreeConvLinear(features, neighbors, linear_->weight, linear_->bias,
+                                            row_offsets, weight_by_offset_.Of(linear_->weight))));
   }
   const int64_t rows = neighbors.size(0);
   torch::Tensor gathered = UseInferenceKernels(features)

@@ -12,6 +12,7 @@
 #include <array>
 #include <vector>
 
+#include "core/net/inference_kernels.h"
 #include "core/net/net_input.h"
 #include "core/net/rpsr_net.h"
 
@@ -52,6 +53,7 @@ class TreeConvImpl : public torch::nn::Module {
   int64_t in_channels_;
   torch::nn::Linear linear_{nullptr};
   torch::nn::BatchNorm1d norm_{nullptr};
+  TransposedWeightCache weight_by_offset_;  // the rulebook's weight layout (inference only)
 };
 TORCH_MODULE(TreeConv);
 

@@ -134,8 +134,59 @@ TEST(InferenceKernelsTest, SparseTreeConvEqualsTheLinearMapOverGatheredRows) {
       torch::Tensor got = SparseTreeConvLinear(features, neighbors, linear->weight, linear->bias);
       ASSERT_EQ(got.sizes(), expected.sizes());
       EXPECT_TRUE(torch::allclose(got, expected, 1e-5, 1e-5)) << "channels " << channels;
+      // The weight by offset (weight.t()), as TreeConv passes it: the same map.
+      const std::vector<int64_t> one_cloud =
+          neighbors.size(0) == 400 ? std::vector<int64_t>{0, 400} : std::vector<int64_t>{};
+      torch::Tensor by_offset =
+          SparseTreeConvLinear(features, neighbors, linear->weight, linear->bias, one_cloud,
+                               linear->weight.t().contiguous());
+      EXPECT_TRUE(torch::allclose(by_offset, expected, 1e-5, 1e-5)) << "channels " << channels;
     }
   }
+}
+
+TEST(InferenceKernelsTest, SparseTreeConvRejectsAWeightByOffsetOfAnotherShape) {
+  if (!SparseTreeConvAvailable()) GTEST_SKIP() << "the loaded BLAS exports no sgemm_";
+  torch::NoGradGuard no_grad;
+  torch::nn::Linear linear(27 * 16, 8);
+  torch::Tensor features = torch::randn({5, 16});
+  torch::Tensor neighbors = torch::full({5, 27}, 5, torch::kInt64);
+  // Linear's own layout, not its transpose.
+  EXPECT_THROW(SparseTreeConvLinear(features, neighbors, linear->weight, linear->bias, {},
+                                    linear->weight.contiguous()),
+               c10::Error);
+  EXPECT_THROW(SparseTreeConvLinear(features, neighbors, linear->weight, linear->bias, {},
+                                    linear->weight.t().to(torch::kFloat64).contiguous()),
+               c10::Error);
+}
+
+TEST(InferenceKernelsTest, TransposedWeightCacheFollowsEveryChangeOfTheWeight) {
+  torch::nn::Linear linear(6, 4);
+  TransposedWeightCache cache;
+  torch::Tensor first = cache.Of(linear->weight);
+  EXPECT_TRUE(torch::equal(first, linear->weight.t()));
+  EXPECT_TRUE(first.is_contiguous());
+  // Unchanged: the same tensor, not a new transpose.
+  EXPECT_EQ(cache.Of(linear->weight).data_ptr(), first.data_ptr());
+  // An in-place write (a loaded state, an optimiser's step) is seen.
+  {
+    torch::NoGradGuard no_grad;
+    linear->weight.mul_(2.0);
+  }
+  EXPECT_TRUE(torch::equal(cache.Of(linear->weight), linear->weight.t()));
+  // Another weight of the same shape (another module) is seen too.
+  torch::nn::Linear other(6, 4);
+  EXPECT_TRUE(torch::equal(cache.Of(other->weight), other->weight.t()));
+  // A copy starts empty and answers for its own weight.
+  TransposedWeightCache copy = cache;
+  EXPECT_TRUE(torch::equal(copy.Of(linear->weight), linear->weight.t()));
+  // A weight made under InferenceMode has no version counter: transposed afresh.
+  torch::Tensor made_in_inference;
+  {
+    c10::InferenceMode inference;
+    made_in_inference = torch::randn({4, 6});
+  }
+  EXPECT_TRUE(torch::equal(cache.Of(made_in_inference), made_in_inference.t()));
 }
 
 TEST(InferenceKernelsTest, SparseTreeConvHandlesEmptyAndAllEmptyNeighbourhoods) {
