@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <memory>
 #include <vector>
 
 #include "Eigen/Core"
@@ -140,6 +141,40 @@ bool SparseTreeConvAvailable() { return Sgemm() != nullptr; }
 
 namespace {
 
+// out's rows = in's rows `rows[0 .. n)` of `channels` floats. The row sizes of the rulebook's
+// inputs (16, 32 and 64 channels in the shipped models) are compile-time constants, so that each
+// copy is a few vector moves rather than a memcpy call (2% of an object pair's network time).
+template <int kChannels>
+void GatherFixedRows(const float* in, const int32_t* rows, int64_t n, int64_t /*channels*/,
+                     float* out) {
+  for (int64_t r = 0; r < n; ++r) {
+    std::memcpy(out + r * kChannels, in + static_cast<int64_t>(rows[r]) * kChannels,
+                kChannels * sizeof(float));
+  }
+}
+
+void GatherAnyRows(const float* in, const int32_t* rows, int64_t n, int64_t channels, float* out) {
+  for (int64_t r = 0; r < n; ++r) {
+    std::memcpy(out + r * channels, in + static_cast<int64_t>(rows[r]) * channels,
+                channels * sizeof(float));
+  }
+}
+
+using RowGather = void (*)(const float*, const int32_t*, int64_t, int64_t, float*);
+
+RowGather RowGatherFor(int64_t channels) {
+  switch (channels) {
+    case 16:
+      return &GatherFixedRows<16>;
+    case 32:
+      return &GatherFixedRows<32>;
+    case 64:
+      return &GatherFixedRows<64>;
+    default:
+      return &GatherAnyRows;
+  }
+}
+
 // The rulebook convolution of the output rows [begin, end) of one cloud, whose neighbours lie in
 // the input rows [in_begin, in_end) (`empty` marks an empty neighbour), added into `dst`, which
 // holds the bias. The GEMMs see this cloud's rows only, so that a cloud's result does not depend
@@ -153,7 +188,9 @@ void ConvolveSegment(const float* in, const int64_t* idx, int64_t begin, int64_t
   std::array<int64_t, 28> start{};
   for (int64_t i = begin * 27; i < end * 27; ++i) start[i % 27 + 1] += idx[i] != empty;
   for (int k = 0; k < 27; ++k) start[k + 1] += start[k];
-  std::vector<int32_t> pair_out(start[27]), pair_in(start[27]);
+  // Every slot is written below: no zero-fill.
+  const std::unique_ptr<int32_t[]> pair_out(new int32_t[start[27]]);
+  const std::unique_ptr<int32_t[]> pair_in(new int32_t[start[27]]);
   std::array<int64_t, 27> next;
   std::copy(start.begin(), start.begin() + 27, next.begin());
   bool centre_is_self = rows == in_end - in_begin;
@@ -178,22 +215,22 @@ void ConvolveSegment(const float* in, const int64_t* idx, int64_t begin, int64_t
   if (centre_is_self && rows > 0) {
     MultiplyByOffsetBlock(seg_in, rows, channels, wp, 13, width, 1.0f, seg_out);
   }
-  std::vector<float> gathered, product;
+  // Buffers for the largest offset, uninitialised (every row used is written first).
+  int64_t most = 0;
+  for (int k = 0; k < 27; ++k) most = std::max(most, start[k + 1] - start[k]);
+  const std::unique_ptr<float[]> gathered(new float[most * channels]);
+  const std::unique_ptr<float[]> product(new float[most * width]);
+  const RowGather gather = RowGatherFor(channels);
   for (int k = 0; k < 27; ++k) {
     const int64_t n = start[k + 1] - start[k];
     if (n == 0 || (k == 13 && centre_is_self)) continue;
-    const int32_t* out_rows = pair_out.data() + start[k];
-    const int32_t* in_rows = pair_in.data() + start[k];
-    gathered.resize(n * channels);
-    product.resize(n * width);
-    for (int64_t r = 0; r < n; ++r) {
-      std::memcpy(gathered.data() + r * channels,
-                  seg_in + static_cast<int64_t>(in_rows[r]) * channels, channels * sizeof(float));
-    }
-    MultiplyByOffsetBlock(gathered.data(), n, channels, wp, k, width, 0.0f, product.data());
+    const int32_t* out_rows = pair_out.get() + start[k];
+    const int32_t* in_rows = pair_in.get() + start[k];
+    gather(seg_in, in_rows, n, channels, gathered.get());
+    MultiplyByOffsetBlock(gathered.get(), n, channels, wp, k, width, 0.0f, product.get());
     for (int64_t r = 0; r < n; ++r) {
       float* o = seg_out + static_cast<int64_t>(out_rows[r]) * width;
-      const float* v = product.data() + r * width;
+      const float* v = product.get() + r * width;
       for (int64_t c = 0; c < width; ++c) o[c] += v[c];
     }
   }
