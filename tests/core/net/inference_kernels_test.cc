@@ -350,5 +350,29 @@ TEST(InferenceKernelsTest, WeightsThatWantAGradientKeepTheDifferentiablePath) {
   EXPECT_GT(grad.abs().sum().item<float>(), 0.0f);
 }
 
+// The rulebook's transposed weights (TransposedWeightCache) follow an optimiser's step: an
+// inference after it gives what the differentiable path gives with the new weights.
+TEST(InferenceKernelsTest, TreeConvAtInferenceFollowsAnOptimisersStep) {
+  if (!SparseTreeConvAvailable()) GTEST_SKIP() << "the loaded BLAS exports no sgemm_";
+  torch::manual_seed(44);
+  TreeConv conv(32, 16);
+  conv->eval();
+  torch::Tensor features = torch::randn({120, 32});
+  torch::Tensor neighbors = WithSelfAtCentre(IndicesWithEmpty(120, 120, 27, 53));
+  auto inferred = [&] {
+    torch::NoGradGuard no_grad;
+    return conv->forward(features, neighbors);
+  };
+  const torch::Tensor before = inferred();
+  torch::optim::Adam adam(conv->parameters(), torch::optim::AdamOptions(0.05));
+  adam.zero_grad();
+  conv->forward(features, neighbors).pow(2).sum().backward();
+  adam.step();
+  const torch::Tensor after = inferred();
+  const torch::Tensor expected = conv->forward(features, neighbors).detach();  // differentiable
+  EXPECT_FALSE(torch::allclose(before, after, 1e-3, 1e-3));
+  EXPECT_TRUE(torch::allclose(after, expected, 1e-5, 1e-5));
+}
+
 }  // namespace
 }  // namespace rpsr::core::net
