@@ -24,41 +24,40 @@ bool UseInferenceKernels(const torch::Tensor& t) {
 
 namespace {
 
-// Row i of `dst` (kChannels floats) = row idx[i] of `in`, or zeros for the index `rows`, for the
-// rows [begin, end). The row size is a compile-time constant so that each copy is a few moves: as
-// a loop over a run-time count, GCC turns it back into a memset or memcpy call per row of 4-32
-// bytes (loop-idiom recognition), which cost the depth-5 gather more than the copies (the
-// empty-neighbour memsets alone were 1.5% of an object pair's network time).
+// Row i of `dst` = row idx[i] of `in`, or zeros for the index `rows`, for the rows [begin, end);
+// rows of kChannels floats, or of `channels` when kChannels is 0. A row size known at compile
+// time makes each copy a few moves: over a run-time count GCC turns even a hand-written loop
+// into a memset or memcpy call per row (loop-idiom recognition), which cost the depth-5 gather's
+// rows of 1-6 floats more than the copies (the empty neighbours' memsets alone were 1.5% of an
+// object pair's network time).
 template <int kChannels>
-void GatherShortRows(const float* in, const int64_t* idx, int64_t rows, int64_t begin, int64_t end,
-                     float* dst) {
+void GatherRowsOrZeroRange(const float* in, const int64_t* idx, int64_t rows, int64_t channels,
+                           int64_t begin, int64_t end, float* dst) {
+  const int64_t width = kChannels > 0 ? kChannels : channels;
+  const size_t row_bytes = static_cast<size_t>(width) * sizeof(float);
   for (int64_t i = begin; i < end; ++i) {
     const int64_t k = idx[i];
-    float* row = dst + i * kChannels;
+    float* row = dst + i * width;
     if (k == rows) {
-      std::memset(row, 0, kChannels * sizeof(float));
+      std::memset(row, 0, row_bytes);
     } else {
       TORCH_CHECK(k >= 0 && k < rows, "gather index ", k, " outside [0, ", rows, "]");
-      std::memcpy(row, in + k * kChannels, kChannels * sizeof(float));
+      std::memcpy(row, in + k * width, row_bytes);
     }
   }
 }
 
-using GatherFunction = void (*)(const float*, const int64_t*, int64_t, int64_t, int64_t, float*);
+using GatherFunction = void (*)(const float*, const int64_t*, int64_t, int64_t, int64_t, int64_t,
+                                float*);
 
-// GatherShortRows for 1 to kShortRow channels; null for wider rows.
-constexpr int kShortRow = 8;
-GatherFunction ShortRowGather(int64_t channels) {
-  static constexpr std::array<GatherFunction, kShortRow + 1> kByWidth = {nullptr,
-                                                                         &GatherShortRows<1>,
-                                                                         &GatherShortRows<2>,
-                                                                         &GatherShortRows<3>,
-                                                                         &GatherShortRows<4>,
-                                                                         &GatherShortRows<5>,
-                                                                         &GatherShortRows<6>,
-                                                                         &GatherShortRows<7>,
-                                                                         &GatherShortRows<8>};
-  return channels >= 1 && channels <= kShortRow ? kByWidth[channels] : nullptr;
+// The gather for rows of `channels` floats: a fixed row size for 1 to 8 (the depth-5 inputs),
+// the run-time one otherwise (wider rows are worth their memcpy call).
+GatherFunction RowsOrZeroGatherFor(int64_t channels) {
+  static constexpr std::array<GatherFunction, 9> kByWidth = {
+      &GatherRowsOrZeroRange<0>, &GatherRowsOrZeroRange<1>, &GatherRowsOrZeroRange<2>,
+      &GatherRowsOrZeroRange<3>, &GatherRowsOrZeroRange<4>, &GatherRowsOrZeroRange<5>,
+      &GatherRowsOrZeroRange<6>, &GatherRowsOrZeroRange<7>, &GatherRowsOrZeroRange<8>};
+  return channels >= 1 && channels <= 8 ? kByWidth[channels] : kByWidth[0];
 }
 
 }  // namespace
@@ -73,23 +72,9 @@ torch::Tensor GatherRowsOrZero(const torch::Tensor& features, const torch::Tenso
   const float* in = source.data_ptr<float>();
   const int64_t* idx = index.data_ptr<int64_t>();
   float* dst = out.data_ptr<float>();
-  const size_t row_bytes = static_cast<size_t>(channels) * sizeof(float);
-  const GatherFunction short_rows = ShortRowGather(channels);
+  const GatherFunction gather = RowsOrZeroGatherFor(channels);
   at::parallel_for(0, count, 2048, [&](int64_t begin, int64_t end) {
-    if (short_rows != nullptr) {
-      short_rows(in, idx, rows, begin, end, dst);
-      return;
-    }
-    for (int64_t i = begin; i < end; ++i) {
-      const int64_t k = idx[i];
-      float* row = dst + i * channels;
-      if (k == rows) {
-        std::memset(row, 0, row_bytes);
-      } else {
-        TORCH_CHECK(k >= 0 && k < rows, "gather index ", k, " outside [0, ", rows, "]");
-        std::memcpy(row, in + k * channels, row_bytes);
-      }
-    }
+    gather(in, idx, rows, channels, begin, end, dst);
   });
   return out;
 }
@@ -111,8 +96,8 @@ SgemmFunction Sgemm() {
 
 // The weight of a tree convolution as the GEMMs read it: Linear's [width, 27 C] (each offset's
 // block read transposed), or by offset, [27 C, width] (weight.t(): each offset's block is a plain
-// column-major width x C matrix, which OpenBLAS packs faster: 0.6-0.7x the time of the per-offset
-// GEMMs at 50-300 rows, the same products).
+// column-major width x C matrix, which OpenBLAS packs faster: a per-offset GEMM in 0.58-0.72x the
+// time at 50-300 rows, about the same at 560; the same products).
 struct OffsetWeights {
   const float* data = nullptr;
   bool by_offset = false;
@@ -141,22 +126,16 @@ bool SparseTreeConvAvailable() { return Sgemm() != nullptr; }
 
 namespace {
 
-// out's rows = in's rows `rows[0 .. n)` of `channels` floats. The row sizes of the rulebook's
-// inputs (16, 32 and 64 channels in the shipped models) are compile-time constants, so that each
-// copy is a few vector moves rather than a memcpy call (2% of an object pair's network time).
+// out's rows = in's rows `rows[0 .. n)`, of kChannels floats, or of `channels` when kChannels is
+// 0. The rulebook's input widths in the shipped models (16, 32 and 64 channels) get a fixed row
+// size, so that each copy is a few vector moves rather than a memcpy call (2% of an object pair's
+// network time).
 template <int kChannels>
-void GatherFixedRows(const float* in, const int32_t* rows, int64_t n, int64_t /*channels*/,
-                     float* out) {
+void GatherRows(const float* in, const int32_t* rows, int64_t n, int64_t channels, float* out) {
+  const int64_t width = kChannels > 0 ? kChannels : channels;
   for (int64_t r = 0; r < n; ++r) {
-    std::memcpy(out + r * kChannels, in + static_cast<int64_t>(rows[r]) * kChannels,
-                kChannels * sizeof(float));
-  }
-}
-
-void GatherAnyRows(const float* in, const int32_t* rows, int64_t n, int64_t channels, float* out) {
-  for (int64_t r = 0; r < n; ++r) {
-    std::memcpy(out + r * channels, in + static_cast<int64_t>(rows[r]) * channels,
-                channels * sizeof(float));
+    std::memcpy(out + r * width, in + static_cast<int64_t>(rows[r]) * width,
+                static_cast<size_t>(width) * sizeof(float));
   }
 }
 
@@ -165,13 +144,13 @@ using RowGather = void (*)(const float*, const int32_t*, int64_t, int64_t, float
 RowGather RowGatherFor(int64_t channels) {
   switch (channels) {
     case 16:
-      return &GatherFixedRows<16>;
+      return &GatherRows<16>;
     case 32:
-      return &GatherFixedRows<32>;
+      return &GatherRows<32>;
     case 64:
-      return &GatherFixedRows<64>;
+      return &GatherRows<64>;
     default:
-      return &GatherAnyRows;
+      return &GatherRows<0>;
   }
 }
 

@@ -1,6 +1,7 @@
 // One tree convolution at CPU inference, the two ways rpsr computes it: the 27 neighbours
 // gathered into one [N, 27 C] matrix (zero rows for empty ones) and one GEMM, and the rulebook
-// (SparseTreeConvLinear: one GEMM per offset over the neighbours present). The network takes
+// (SparseTreeConvLinear: one GEMM per offset over the neighbours present, each offset's weight
+// block read from the transposed weight TreeConv keeps, as the network runs it). The network takes
 // the rulebook for inputs of 16 channels or more (rpsr_modules.cc); this bench gives the ratio
 // of the two on the machine at hand, on the neighbourhoods of a real 2,048-point object's tree
 // (depth 4: 32 -> 64 channels, depth 3: 64 -> 128, the network's widths).
@@ -24,6 +25,7 @@ struct ConvCase {
   torch::Tensor features;   // [N, C]
   torch::Tensor neighbors;  // [N, 27], N for an empty neighbour
   torch::nn::Linear linear{nullptr};
+  TransposedWeightCache weight_by_offset;  // as TreeConv keeps it
 };
 
 // depth 4 or 3 of the first object of the set rpsr_net_bench uses.
@@ -77,7 +79,8 @@ void BM_TreeConvRulebook(benchmark::State& state) {
   torch::NoGradGuard no_grad;
   for (auto _ : state) {
     torch::Tensor out =
-        SparseTreeConvLinear(c.features, c.neighbors, c.linear->weight, c.linear->bias);
+        SparseTreeConvLinear(c.features, c.neighbors, c.linear->weight, c.linear->bias, {},
+                             c.weight_by_offset.Of(c.linear->weight));
     benchmark::DoNotOptimize(out.data_ptr<float>());
   }
   Counters(state, c);

@@ -146,21 +146,6 @@ TEST(InferenceKernelsTest, SparseTreeConvEqualsTheLinearMapOverGatheredRows) {
   }
 }
 
-TEST(InferenceKernelsTest, SparseTreeConvRejectsAWeightByOffsetOfAnotherShape) {
-  if (!SparseTreeConvAvailable()) GTEST_SKIP() << "the loaded BLAS exports no sgemm_";
-  torch::NoGradGuard no_grad;
-  torch::nn::Linear linear(27 * 16, 8);
-  torch::Tensor features = torch::randn({5, 16});
-  torch::Tensor neighbors = torch::full({5, 27}, 5, torch::kInt64);
-  // Linear's own layout, not its transpose.
-  EXPECT_THROW(SparseTreeConvLinear(features, neighbors, linear->weight, linear->bias, {},
-                                    linear->weight.contiguous()),
-               c10::Error);
-  EXPECT_THROW(SparseTreeConvLinear(features, neighbors, linear->weight, linear->bias, {},
-                                    linear->weight.t().to(torch::kFloat64).contiguous()),
-               c10::Error);
-}
-
 TEST(InferenceKernelsTest, TransposedWeightCacheFollowsEveryChangeOfTheWeight) {
   torch::nn::Linear linear(6, 4);
   TransposedWeightCache cache;
@@ -308,6 +293,14 @@ TEST(InferenceKernelsTest, SparseTreeConvRejectsIndicesAndShapesItCannotUse) {
   torch::Tensor narrower = torch::randn({10, 8});
   EXPECT_THROW(SparseTreeConvLinear(narrower, torch::full({2, 27}, 10, torch::kInt64),
                                     linear->weight, linear->bias),
+               c10::Error);
+  // A weight by offset must be weight.t(): Linear's own layout, or doubles, are refused.
+  const torch::Tensor all_empty = torch::full({2, 27}, 10, torch::kInt64);
+  EXPECT_THROW(SparseTreeConvLinear(features, all_empty, linear->weight, linear->bias, {},
+                                    linear->weight.contiguous()),
+               c10::Error);
+  EXPECT_THROW(SparseTreeConvLinear(features, all_empty, linear->weight, linear->bias, {},
+                                    linear->weight.t().to(torch::kFloat64).contiguous()),
                c10::Error);
 }
 
