@@ -125,16 +125,6 @@ torch::Tensor TreeConvImpl::forward(const torch::Tensor& features, const torch::
                                ? GatherRowsOrZero(features, neighbors)
                                : WithZeroRow(features).index_select(0, neighbors.reshape({-1}));
   gathered = gathered.reshape({rows, 27 * in_channels_});
-  if (UseInferenceKernels(gathered) && row_offsets.size() > 2) {
-    // Each cloud's rows through their own GEMM, as the rulebook does: over a whole batch,
-    // OpenBLAS's AVX2 kernels may block a cloud's rows otherwise than alone (see Pass).
-    std::vector<torch::Tensor> parts;
-    for (size_t c = 0; c + 1 < row_offsets.size(); ++c) {
-      parts.push_back(linear_->forward(
-          gathered.narrow(0, row_offsets[c], row_offsets[c + 1] - row_offsets[c])));
-    }
-    return torch::relu(norm_->forward(torch::cat(parts, 0)));
-  }
   return torch::relu(norm_->forward(linear_->forward(gathered)));
 }
 
@@ -185,17 +175,7 @@ torch::Tensor HierarchicalEncoderImpl::forward(const PackedClouds& clouds) {
                               ? GatherRowsOrZero(fused, clouds.token_node)
                               : WithZeroRow(fused).index_select(0, clouds.token_node.reshape({-1})))
                              .reshape({clouds.batch, kNetTokens, fused.size(1)});
-  // One cloud's tokens at a time at inference, for the reason TreeConv's rows are (see Pass).
-  torch::Tensor embedded;
-  if (UseInferenceKernels(tokens) && clouds.batch > 1) {
-    std::vector<torch::Tensor> parts;
-    for (int64_t b = 0; b < clouds.batch; ++b) {
-      parts.push_back(to_embedding_->forward(tokens.narrow(0, b, 1)));
-    }
-    embedded = torch::cat(parts, 0);
-  } else {
-    embedded = to_embedding_->forward(tokens);
-  }
+  torch::Tensor embedded = to_embedding_->forward(tokens);
   // Empty tokens stay exactly zero (the bias would otherwise make them look alike and real).
   return embedded.masked_fill(clouds.token_empty.unsqueeze(-1), 0.0);
 }
@@ -287,50 +267,9 @@ RpsrNetworkImpl::RpsrNetworkImpl(const RpsrNetConfig& config) : config_(config) 
   transformer_ = register_module("transformer", ContextTransformer(config));
 }
 
-namespace {
-
-// Batch element b of a [B, ...] tensor (dim 0) or of a sequence-first [T, B, ...] one (dim 1).
-torch::Tensor Element(const torch::Tensor& t, int64_t b, int64_t dim = 0) {
-  return t.narrow(dim, b, 1);
-}
-
-// The tokens of a batch's cloud b, as Pass reads them.
-PackedClouds TokensOf(const PackedClouds& clouds, int64_t b) {
-  PackedClouds one;
-  one.batch = 1;
-  one.token_com = Element(clouds.token_com, b);
-  one.token_empty = Element(clouds.token_empty, b);
-  if (clouds.token_weight.defined()) one.token_weight = Element(clouds.token_weight, b);
-  return one;
-}
-
-// At inference, the Transformer and the heads run one pair at a time: their GEMMs over a whole
-// batch's tokens let OpenBLAS's AVX2 (Haswell, Zen) kernels compute a row with another blocking
-// than alone, so a pair's scores moved in their last bits with what shared its batch, and an
-// ill-conditioned SVD turned that into degrees. Alone, every pair sees the shapes it sees in a
-// batch of one: answers independent of the batch on every BLAS. (The encoder's convolutions
-// already run on each cloud's own rows; training keeps whole batches.)
-bool OnePairAtATime(const torch::Tensor& features) {
-  return UseInferenceKernels(features) && features.size(0) > 1;
-}
-
-}  // namespace
-
 EncodedTarget RpsrNetworkImpl::EncodeTarget(const PackedClouds& target) {
   EncodedTarget encoded;
   encoded.embedding = Encode(target);
-  if (OnePairAtATime(encoded.embedding)) {
-    std::vector<torch::Tensor> memory, self_attended;
-    for (int64_t b = 0; b < encoded.embedding.size(0); ++b) {
-      const torch::Tensor y = Element(encoded.embedding, b);
-      const torch::Tensor empty = Element(target.token_empty, b);
-      memory.push_back(transformer_->Memory(y, empty));
-      self_attended.push_back(transformer_->SelfAttended(y, empty));
-    }
-    encoded.memory = torch::cat(memory, 1);
-    encoded.self_attended = torch::cat(self_attended, 1);
-    return encoded;
-  }
   encoded.memory = transformer_->Memory(encoded.embedding, target.token_empty);
   encoded.self_attended = transformer_->SelfAttended(encoded.embedding, target.token_empty);
   return encoded;
@@ -339,24 +278,6 @@ EncodedTarget RpsrNetworkImpl::EncodeTarget(const PackedClouds& target) {
 PassOutput RpsrNetworkImpl::Pass(const PackedClouds& source, const PackedClouds& target,
                                  const EncodedTarget& encoded_target) {
   torch::Tensor fs = Encode(source);
-  if (OnePairAtATime(fs)) {
-    std::vector<torch::Tensor> rotation, translation, scores;
-    for (int64_t b = 0; b < fs.size(0); ++b) {
-      const EncodedTarget one{Element(encoded_target.embedding, b),
-                              Element(encoded_target.memory, b, 1),
-                              Element(encoded_target.self_attended, b, 1)};
-      PassOutput out = Match(Element(fs, b), TokensOf(source, b), TokensOf(target, b), one);
-      rotation.push_back(out.rotation);
-      translation.push_back(out.translation);
-      scores.push_back(out.scores);
-    }
-    return {torch::cat(rotation, 0), torch::cat(translation, 0), torch::cat(scores, 0)};
-  }
-  return Match(fs, source, target, encoded_target);
-}
-
-PassOutput RpsrNetworkImpl::Match(const torch::Tensor& fs, const PackedClouds& source,
-                                  const PackedClouds& target, const EncodedTarget& encoded_target) {
   const torch::Tensor& ft = encoded_target.embedding;
   // = transformer_(fs, source, ft, target) and transformer_(ft, target, fs, source), with the
   // target-only steps taken from encoded_target.

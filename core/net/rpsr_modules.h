@@ -145,10 +145,6 @@ class RpsrNetworkImpl : public torch::nn::Module {
   const RpsrNetConfig& config() const { return config_; }
 
  private:
-  // Pass after the source's encoding: Transformer residuals, scores and the SVD head.
-  PassOutput Match(const torch::Tensor& fs, const PackedClouds& source, const PackedClouds& target,
-                   const EncodedTarget& encoded_target);
-
   RpsrNetConfig config_;
   HierarchicalEncoder encoder_{nullptr};
   ContextTransformer transformer_{nullptr};

@@ -243,6 +243,23 @@ size_t RpsrNet::EncodingBytes(const NetTargetEncoding& encoding) {
 
 namespace {
 
+// What every pair of a batch must be: both trees given, and a given target encoding made by this
+// network from this target.
+absl::Status ValidatePairs(const RpsrNet::Impl& impl, absl::Span<const NetPair> pairs) {
+  for (size_t b = 0; b < pairs.size(); ++b) {
+    if (pairs[b].source == nullptr || pairs[b].target == nullptr) {
+      return absl::InvalidArgumentError(absl::StrCat("pair ", b, " lacks a source or target tree"));
+    }
+    const NetTargetEncoding* given = pairs[b].target_encoding;
+    if (given != nullptr && (given->owner != &impl || given->tree != pairs[b].target)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("pair ", b, ": its target encoding was made ",
+                       given->owner != &impl ? "by another network" : "from another tree"));
+    }
+  }
+  return absl::OkStatus();
+}
+
 // The batch's target side: packed and encoded here for the pairs without a NetTargetEncoding,
 // concatenated along the batch dimension with the given ones for the others, in pair order.
 absl::Status TargetSide(RpsrNet::Impl& impl, absl::Span<const NetPair> pairs,
@@ -254,10 +271,6 @@ absl::Status TargetSide(RpsrNet::Impl& impl, absl::Span<const NetPair> pairs,
     if (given == nullptr) {
       missing_index[b] = missing.size();
       missing.push_back(pairs[b]);
-    } else if (given->owner != &impl || given->tree != pairs[b].target) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("pair ", b, ": its target encoding was made ",
-                       given->owner != &impl ? "by another network" : "from another tree"));
     }
   }
   if (missing.size() == pairs.size()) {  // the common case: one batched encoding
@@ -311,15 +324,28 @@ absl::StatusOr<std::vector<NetEstimate>> RpsrNet::Estimate(absl::Span<const NetP
                                                            int passes) const {
   if (pairs.empty()) return std::vector<NetEstimate>{};
   if (passes <= 0) passes = impl_->config.passes;
+  if (absl::Status valid = ValidatePairs(*impl_, pairs); !valid.ok()) return valid;
+  if (pairs.size() > 1 && impl_->device.is_cpu()) {
+    // On CPU a batch is its pairs one at a time. Over a whole batch's rows, OpenBLAS's AVX2
+    // kernels (Haswell, Zen) block a pair's rows otherwise than alone, so its scores changed in
+    // their last bits with what shared its batch and an ill-conditioned SVD made degrees of it;
+    // and a batch saved little here (1.1-1.3x: the network's time is arithmetic that grows with
+    // the nodes). GPU builds keep whole batches.
+    std::vector<NetEstimate> results;
+    results.reserve(pairs.size());
+    for (size_t b = 0; b < pairs.size(); ++b) {
+      absl::StatusOr<std::vector<NetEstimate>> one = Estimate({&pairs[b], 1}, passes);
+      if (!one.ok()) {
+        return absl::Status(one.status().code(),
+                            absl::StrCat("pair ", b, ": ", one.status().message()));
+      }
+      results.push_back(std::move(one->front()));
+    }
+    return results;
+  }
   try {
     torch::InferenceMode inference;
     net::RpsrNetwork& network = impl_->network;
-    for (size_t b = 0; b < pairs.size(); ++b) {
-      if (pairs[b].source == nullptr || pairs[b].target == nullptr) {
-        return absl::InvalidArgumentError(
-            absl::StrCat("pair ", b, " lacks a source or target tree"));
-      }
-    }
     net::PackedClouds target;
     net::EncodedTarget encoded_target;
     absl::Status target_side = TargetSide(*impl_, pairs, target, encoded_target);

@@ -90,10 +90,10 @@ class RpsrNet {
   // Number of trainable scalars.
   int64_t NumParameters() const;
 
-  // Registers every pair in one batched forward pass per pass (inference mode, thread-safe).
-  // passes <= 0 uses config().passes. Results equal those of the pairs one at a time, bit for
-  // bit: on CPU the pass's GEMMs run each pair's (each cloud's) rows on their own, since BLAS
-  // kernels may block a batch's rows otherwise than one pair's (see RpsrNetworkImpl::Pass).
+  // Registers every pair (inference mode, thread-safe): on a GPU in one batched forward pass per
+  // pass, on CPU one pair at a time, since CPU BLAS kernels may block a batch's rows otherwise
+  // than one pair's. passes <= 0 uses config().passes. Results equal those of the pairs one at a
+  // time, bit for bit on CPU.
   absl::StatusOr<std::vector<NetEstimate>> Estimate(absl::Span<const NetPair> pairs,
                                                     int passes = 0) const;
 

@@ -305,7 +305,7 @@ TEST_F(ServerTest, ConcurrentRequestsAreBatchedWithTheSameResults) {
   for (int i = 0; i < kClients; ++i) {
     ASSERT_TRUE(statuses[i].ok()) << statuses[i].error_message();
     largest_batch = std::max(largest_batch, responses[i].result().timings().batch_size());
-    // To every bit: a batch runs each pair's rows through the network's GEMMs on their own.
+    // To every bit: on CPU the network runs a batch's pairs one at a time.
     EXPECT_EQ(TransformOf(responses[i].result().transform_target_source()).matrix(),
               TransformOf(alone.result().transform_target_source()).matrix())
         << "client " << i;

@@ -47,7 +47,8 @@ UnseenPairs MakeUnseenPairs(uint64_t first_seed, int count) {
 }
 
 // Targets encoded once (RpsrNet::EncodeTarget) mixed in one batch with fresh ones: the same
-// estimates as the plain batch, to every bit (each pair's rows are its own, see below).
+// estimates as the plain batch, to every bit (on CPU a batch runs its pairs one at a time, see
+// below).
 TEST(ShippedObjectModelTest, EncodedTargetsInAMixedBatchGiveTheSameEstimates) {
   auto net = RpsrNet::Load(kModel);
   ASSERT_TRUE(net.ok()) << net.status();
@@ -109,10 +110,10 @@ TEST(ShippedObjectModelTest, LoadsAndBeatsIdentityOnUnseenClasses) {
       << "median rotation error " << net_median << " deg vs " << identity_median
       << " deg for the identity";
 
-  // Batched = one by one, now on the rotation itself, to every bit: on CPU each pair's rows go
-  // through the GEMMs on their own (RpsrNetworkImpl::Pass), so no BLAS kernel can block a pair's
-  // rows otherwise in a batch (with OpenBLAS's AVX2 kernels a whole-batch GEMM did, and moved
-  // answers in their last bits; a batching bug moves degrees).
+  // Batched = one by one, now on the rotation itself, to every bit: on CPU Estimate runs a
+  // batch's pairs one at a time, so no BLAS kernel can block a pair's rows otherwise in a batch
+  // (with OpenBLAS's AVX2 kernels a whole-batch GEMM did, and moved answers in their last bits;
+  // a batching bug moves degrees).
   auto one_pass = (*net)->Estimate(pairs, 1);
   ASSERT_TRUE(one_pass.ok());
   for (int i = 0; i < 4; ++i) {

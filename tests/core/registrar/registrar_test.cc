@@ -240,7 +240,7 @@ TEST(RegistrarBatchTest, BatchEqualsPairsOneByOne) {
     auto single =
         SharedRegistrar().Register(*requests[i].source, *requests[i].target, requests[i].options);
     ASSERT_TRUE(batch[i].ok() && single.ok()) << i;
-    // To every bit: a batch runs each pair's rows through the network's GEMMs on their own.
+    // To every bit: on CPU the network runs a batch's pairs one at a time.
     EXPECT_EQ(batch[i]->net_T_target_source.matrix(), single->net_T_target_source.matrix()) << i;
     EXPECT_EQ(batch[i]->T_target_source.matrix(), single->T_target_source.matrix()) << i;
     EXPECT_EQ(batch[i]->valid, single->valid) << i;
