@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include "Eigen/Cholesky"
@@ -71,53 +72,6 @@ class BlockCandidates {
 
 }  // namespace
 
-BlockNormals::BlockNormals(const Octree& tree, int depth, const CellIndex& index)
-    : tree_(tree),
-      depth_(depth),
-      index_(index),
-      normals_(tree.level(depth).size()),
-      state_(tree.level(depth).size(), 0) {}
-
-PlaneLevel BlockNormals::Planes() {
-  PlaneLevel planes;
-  planes.tree = &tree_;
-  planes.depth = depth_;
-  planes.index = &index_;
-  planes.normal = [this](int node) { return Of(node); };
-  return planes;
-}
-
-const Eigen::Vector3d* BlockNormals::Of(int node) {
-  const size_t k = static_cast<size_t>(node);
-  if (state_[k] == 0) {
-    const Octree::Level& level = tree_.level(depth_);
-    const std::array<uint32_t, 3> home = tree_.Cell(depth_, node);
-    const int64_t cells = int64_t{1} << depth_;
-    double count = 0.0;
-    Eigen::Vector3d first = Eigen::Vector3d::Zero();
-    Eigen::Matrix3d second = Eigen::Matrix3d::Zero();
-    std::array<int32_t, 27> block;
-    FindBlock(index_, home, {}, 27, cells, block.data());
-    for (const int32_t j : block) {
-      if (j < 0) continue;
-      const double w = level.count[j];
-      const Eigen::Vector3d mean = level.center_of_mass[j].cast<double>();
-      count += w;
-      first += w * mean;
-      second += w * (tree_.Covariance(depth_, j).cast<double>() + mean * mean.transpose());
-    }
-    state_[k] = -1;
-    if (count >= 3.0) {
-      const Eigen::Vector3d mean = first / count;
-      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(second / count -
-                                                                  mean * mean.transpose());
-      normals_[k] = solver.eigenvectors().col(0);
-      state_[k] = 1;
-    }
-  }
-  return state_[k] == 1 ? &normals_[k] : nullptr;
-}
-
 double MedianSurfaceScatterCells(const Octree& source, int source_depth, const PlaneLevel& target,
                                  const Eigen::Isometry3d& T_target_source, size_t max_nodes) {
   const Octree::Level& level = source.level(source_depth);
@@ -144,15 +98,46 @@ double MedianSurfaceScatterCells(const Octree& source, int source_depth, const P
   return *middle;
 }
 
-PlanePolishResult PolishPointToPlane(const Octree& source, int source_depth,
-                                     const PlaneLevel& target,
+namespace {
+
+// The target's cells near each source node, gathered within the kernel's support plus a margin
+// and gathered again only when the node has moved more than the margin from where they were
+// (after the first iterations almost never): the same moments as gathering every time, without
+// the cell-index lookups of the support's 125-216 cells per node and iteration.
+class SupportCache {
+ public:
+  SupportCache(const SurfaceKernel& kernel, size_t nodes, double margin)
+      : kernel_(kernel),
+        margin_(margin),
+        anchors_(nodes, Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN())),
+        cells_(nodes) {}
+
+  SurfaceMoments At(size_t k, const Eigen::Vector3d& q) {
+    std::vector<int32_t>& cells = cells_[k];
+    // A NaN anchor (never gathered) fails the comparison.
+    if (!((q - anchors_[k]).squaredNorm() <= margin_ * margin_)) {
+      anchors_[k] = q;
+      cells.clear();
+      kernel_.Gather(q, kernel_.radius() + margin_, cells);
+    }
+    return kernel_.Moments(q, cells.data(), cells.size());
+  }
+
+ private:
+  const SurfaceKernel& kernel_;
+  double margin_;
+  std::vector<Eigen::Vector3d> anchors_;
+  std::vector<std::vector<int32_t>> cells_;
+};
+
+}  // namespace
+
+PlanePolishResult PolishPointToPlane(const SmoothedNodes& source, const SurfaceKernel& target,
                                      const Eigen::Isometry3d& T_target_source,
                                      const PlanePolishOptions& options) {
   PlanePolishResult result;
   result.T_target_source = T_target_source;
-  const Octree::Level& level = source.level(source_depth);
-  const Octree::Level& target_level = target.tree->level(target.depth);
-  const double edge = CellEdge(*target.tree, target.depth);
+  const double edge = CellEdge(target.tree(), target.depth());
   const double k2 = options.robust_scale_cells * options.robust_scale_cells * edge * edge;
   Eigen::Matrix3d R = T_target_source.linear();
   Eigen::Vector3d t = T_target_source.translation();
@@ -163,20 +148,22 @@ PlanePolishResult PolishPointToPlane(const Octree& source, int source_depth,
     double weight = 0.0;
   };
   std::vector<Term> terms;
-  terms.reserve(level.size());
-  BlockCandidates blocks(target, level.size(), 27);
+  terms.reserve(source.points.size());
+  SupportCache supports(target, source.points.size(), 0.5 * edge);
   for (int iteration = 0; iteration < options.max_iterations; ++iteration) {
     terms.clear();
     Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
     double weight_sum = 0.0;
-    for (size_t i = 0; i < level.size(); ++i) {
-      const Eigen::Vector3d q = R * level.center_of_mass[i].cast<double>() + t;
-      const Partner p = blocks.Nearest(i, q);
-      if (p.node < 0) continue;
-      const double r = p.normal->dot(q - target_level.center_of_mass[p.node].cast<double>());
+    for (size_t i = 0; i < source.points.size(); ++i) {
+      const Eigen::Vector3d q = R * source.points[i] + t;
+      const SurfaceMoments m = supports.At(i, q);
+      if (m.points < options.min_support_points) continue;
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(m.spread);
+      const Eigen::Vector3d normal = solver.eigenvectors().col(0);
+      const double r = normal.dot(q - m.mean);
       const double g = k2 / (k2 + r * r);
-      const double w = static_cast<double>(level.count[i]) * g * g;
-      terms.push_back({q, *p.normal, r, w});
+      const double w = source.weights[i] * g * g;
+      terms.push_back({q, normal, r, w});
       centroid += w * q;
       weight_sum += w;
     }

@@ -1,23 +1,21 @@
 // The noise polish (issue 5): when a cloud's points scatter about the surface by a sizeable part
-// of the finest cell, a last point-to-plane stage one depth coarser.
+// of the finest cell, a last point-to-plane stage one depth coarser, on kernel-smoothed surfaces.
 //
 // Why: a jittered source's finest cells hold single samples displaced by about a cell, and the
 // re-binned coarse depths cut its thick shell with the target's grid; both bias the plane-to-plane
 // minimum (refined from the TRUE pose under jitter 0.08, 33 of 40 unseen pairs ended beyond (1
-// deg, 0.01)). Point-to-plane residuals from the source's OWN nodes one depth coarser average the
-// noise (a few samples a node) and ignore where along the surface a node's CoM falls, which is
-// where a grid cutting a thick shell puts its bias -- what Open3D's point-to-plane ICP on
-// voxel-averaged points does, and why it was ahead of rpsr under heavy jitter. On clean clouds it
-// costs precision (coarser nodes sag inside curved surfaces), so it runs only when the measured
-// scatter says the finest depth is finer than the data.
+// deg, 0.01)). The polish instead fits the source's nodes one depth coarser, each smoothed by a
+// biweight kernel of 2.5 cells (smoothed_surface.h), to the target's kernel-smoothed surface about
+// them: both sides are local averages across the thick shell, continuous in the pose, and sag
+// alike inside curved surfaces. On clean clouds it costs precision (coarser, smoothed surfaces),
+// so it runs only when the measured scatter says the finest depth is finer than the data.
 //
 // Measured (`rpsr eval --protocol objects --split unseen --count 100 --seed S --disturbance jitter
-// --level 3|4`, recall at (1 deg, 0.01), seeds 1 / 2 / 3): jitter 0.05 0.54 / 0.49 / 0.54 -> 0.66 /
-// 0.67 / 0.61, jitter 0.08 0.19 / 0.16 / 0.11 -> 0.46 / 0.44 / 0.45; clean, noise, outliers and
-// crop within a pair on seeds 1 and 2 (their scatter stays below the threshold). Chosen on seed 1,
-// held on seeds 2 and 3: the nodes one depth above the finest (two above: 0.51 / 0.25 on seed 1),
-// the target's normals from the 3x3x3 block around each node (BlockNormals; the variants in
-// tests/bench/notes/refinement-notes.md, *The noise polish*).
+// --level 3|4`, recall at (1 deg, 0.01), seeds 1 / 2 / 3): jitter 0.05 0.54 / 0.49 / 0.54 before
+// any polish, 0.66 / 0.67 / 0.63 with session 16's (each node to the nearest target CoM, normals
+// from the 3x3x3 block), 0.75 / 0.70 / 0.73 with this one; jitter 0.08 0.19 / 0.16 / 0.11, 0.46 /
+// 0.44 / 0.45, 0.64 / 0.61 / 0.61. Clean, noise, outliers and crop unchanged (their scatter stays
+// below the threshold). The variants in tests/bench/notes/refinement-notes.md, *The noise polish*.
 #ifndef RPSR_CORE_REFINE_NOISE_POLISH_H_
 #define RPSR_CORE_REFINE_NOISE_POLISH_H_
 
@@ -28,6 +26,7 @@
 
 #include "Eigen/Geometry"
 #include "core/refine/cell_index.h"
+#include "core/refine/smoothed_surface.h"
 #include "core/tree/bh_tree.h"
 
 namespace rpsr::core {
@@ -40,30 +39,6 @@ struct PlaneLevel {
   int depth = 0;
   const CellIndex* index = nullptr;
   std::function<const Eigen::Vector3d*(int node)> normal;
-};
-
-// Plane normals of a target level's nodes, each from the 3x3x3 block of cells centred on it (the
-// count-weighted spread of the points of the occupied cells there), computed on first use and
-// kept. On unseen objects under jitter (the polish one depth above the finest, depth 5), these
-// normals rather than those of each node's ancestor two depths up (a grid-aligned patch, off-centre
-// for most of its nodes): recall at (1 deg, 0.01), jitter 0.05 / 0.08, seeds 1 / 2 / 3, 0.60 /
-// 0.30, 0.57 / 0.33, 0.56 / 0.36 -> 0.66 / 0.47, 0.67 / 0.44, 0.61 / 0.45; a 5x5x5 block on seed 1
-// 0.63 / 0.37. One tree, one depth, one thread.
-class BlockNormals {
- public:
-  BlockNormals(const Octree& tree, int depth, const CellIndex& index);
-  // nullptr when the block holds fewer than 3 points.
-  const Eigen::Vector3d* Of(int node);
-  int depth() const { return depth_; }
-  // The level's planes with these normals, for PolishPointToPlane (valid while this lives).
-  PlaneLevel Planes();
-
- private:
-  const Octree& tree_;
-  int depth_;
-  const CellIndex& index_;
-  std::vector<Eigen::Vector3d> normals_;
-  std::vector<int8_t> state_;  // 0 not yet computed, 1 a normal, -1 none
 };
 
 // The median over the source's nodes of `source_depth` (an even stride, at most max_nodes) of
@@ -79,19 +54,28 @@ double MedianSurfaceScatterCells(const Octree& source, int source_depth, const P
                                  const Eigen::Isometry3d& T_target_source, size_t max_nodes);
 
 struct PlanePolishOptions {
+  // The smoothing kernel's support, in cell edges of the target level (the caller builds both
+  // kernels with it). Unseen objects under jitter 0.08, seeds 1 / 2: 1.5 cells 0.40 / 0.35, 2
+  // 0.58 / 0.56, 2.5 0.64 / 0.61, 3 0.56 / 0.58, 4 0.46 / 0.48.
+  double kernel_radius_cells = 2.5;
+  // The source's nodes read, at most (an even stride over the level; SmoothNodes).
+  size_t max_nodes = 2048;
   // Geman-McClure scale on the plane distance, in cell edges of the target level: wide (jittered
   // nodes scatter by up to a cell), but a node far off its plane (an outlier) still counts little.
   double robust_scale_cells = 2.0;
   // Stops when an update rotates less than this (radians) and translates the matched centroid
   // less than translation_epsilon_cells cell edges (the refinement's finest-depth epsilons), or
-  // after max_iterations (its per-depth cap): under heavy jitter the nearest CoMs keep trading
-  // partners and the updates settle at 1e-4 to 1e-3 rad (0.01-0.06 degree) rather than vanish.
+  // after max_iterations (its per-depth cap): under heavy jitter the updates shrink slowly (most
+  // pairs end with steps of 1e-3 rad, 0.06 degree; 30 iterations instead: 0.66 / 0.63 for 1.5
+  // times the polish's time).
   int max_iterations = 12;
   double rotation_epsilon_rad = 1e-4;
   double translation_epsilon_cells = 1e-3;
   // Fewer correspondences than this: no update (a handful of nodes cannot hold six degrees of
   // freedom).
   int min_correspondences = 12;
+  // A target support of fewer points than this has no plane (a node's partner needs a spread).
+  double min_support_points = 3.0;
   // A polish corrects an answer by a fraction of a degree and of a cell: a step that would turn it
   // by more than max_step_rad or move its matched points by more than max_step_cells cell edges
   // (directions the planes leave free, as along a plane or a corridor) stops it where it stands.
@@ -109,12 +93,11 @@ struct PlanePolishResult {
   double last_update_translation = 0.0;
 };
 
-// Gauss-Newton on sum_i w_i rho(n_j . (T * CoM_i - q_j)) over the source's own nodes of
-// `source_depth` (w_i: the node's point count), each matched to the nearest target CoM among the
-// 27 target cells around it. Starts at `T_target_source`; returns it unchanged (iterations 0)
-// when too few nodes find a partner with a plane.
-PlanePolishResult PolishPointToPlane(const Octree& source, int source_depth,
-                                     const PlaneLevel& target,
+// Gauss-Newton on sum_i w_i rho(n(q_i) . (q_i - m(q_i))), q_i = T * s_i for the source's smoothed
+// nodes s_i (w_i: the node's point count), m and n the target kernel's mean and normal about q_i
+// (supports of at least min_support_points). Starts at `T_target_source`; returns it unchanged
+// (iterations 0) when too few nodes find a supported plane.
+PlanePolishResult PolishPointToPlane(const SmoothedNodes& source, const SurfaceKernel& target,
                                      const Eigen::Isometry3d& T_target_source,
                                      const PlanePolishOptions& options = {});
 

@@ -395,8 +395,8 @@ struct TreeRefinementCache::Impl {
   int fractions_min_count = -1;
   std::optional<double> source_fraction;
   std::optional<double> target_fraction;
-  // The noise polish's target normals (one depth; every start on the pair reads the same ones).
-  std::unique_ptr<BlockNormals> block_normals;
+  // The noise polish's smoothed source nodes (one depth; every start on the pair reads them).
+  std::unique_ptr<SmoothedNodes> polish_source;
 
   void BindTo(const Octree& s, const Octree& t) {
     if (source == &s && target == &t) return;
@@ -404,16 +404,18 @@ struct TreeRefinementCache::Impl {
     target = &t;
     sources.clear();
     targets.clear();
-    block_normals.reset();
+    polish_source.reset();
     fractions_min_count = -1;
   }
 
-  // The noise polish's normals at `depth` of the bound target, with `index` (that depth's).
-  BlockNormals& BlockNormalsAt(int depth, const CellIndex& index) {
-    if (block_normals == nullptr || block_normals->depth() != depth) {
-      block_normals = std::make_unique<BlockNormals>(*target, depth, index);
+  // The noise polish's source nodes at `depth`, smoothed with `radius`.
+  const SmoothedNodes& PolishSourceAt(int depth, double radius, size_t max_nodes) {
+    if (polish_source == nullptr || polish_source->depth != depth ||
+        polish_source->radius != radius) {
+      polish_source =
+          std::make_unique<SmoothedNodes>(SmoothNodes(*source, depth, radius, max_nodes));
     }
-    return *block_normals;
+    return *polish_source;
   }
 
   // The options' line rule for the bound pair: as given, or chosen from the trees' fractions
@@ -1330,17 +1332,19 @@ TreeRefinementResult NoisePolish(const Octree& source, const Octree& target,
       result.fitness < options.noise_polish_min_fitness) {
     return result;
   }
-  // The polish's planes: normals from the 3x3x3 block of cells centred on each node (a
-  // grid-aligned ancestor's plane is off-centre for most of its nodes).
-  const PlaneLevel planes =
-      shared.BlockNormalsAt(depth, shared.Target(depth, shapes).side->index).Planes();
+  // Both sides smoothed by the same kernel, its support in cells of the target's level.
+  const PlanePolishOptions polish;
+  const double radius = polish.kernel_radius_cells * CellEdge(target, depth);
+  const SurfaceKernel target_surface(target, depth, shared.Target(depth, shapes).side->index,
+                                     radius);
+  const SmoothedNodes& nodes = shared.PolishSourceAt(depth, radius, polish.max_nodes);
   const PlanePolishResult polished =
-      PolishPointToPlane(source, depth, planes, result.T_target_source);
+      PolishPointToPlane(nodes, target_surface, result.T_target_source, polish);
   if (polished.iterations == 0) return result;
   DepthStage stage;
   stage.depth = depth;
   stage.cell_edge = CellEdge(target, depth);
-  stage.source_nodes = static_cast<int>(source.level(depth).size());
+  stage.source_nodes = static_cast<int>(nodes.points.size());
   stage.correspondences = polished.correspondences;
   stage.iterations = polished.iterations;
   stage.converged = polished.converged;

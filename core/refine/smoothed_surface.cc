@@ -1,0 +1,97 @@
+#include "core/refine/smoothed_surface.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+#include "core/tree/morton.h"
+
+namespace rpsr::core {
+
+SurfaceKernel::SurfaceKernel(const Octree& tree, int depth, const CellIndex& index, double radius)
+    : tree_(tree), depth_(depth), index_(index), radius_(radius) {}
+
+void SurfaceKernel::Gather(const Eigen::Vector3d& x, double reach,
+                           std::vector<int32_t>& out) const {
+  const Octree::Level& level = tree_.level(depth_);
+  const int64_t cells = int64_t{1} << depth_;
+  const double scale = static_cast<double>(cells) / (2.0 * tree_.half_length());
+  const Eigen::Vector3d p =
+      (x - tree_.center()) * scale + Eigen::Vector3d::Constant(0.5 * static_cast<double>(cells));
+  if (!p.allFinite()) return;
+  // Every cell whose box meets the cube of half-edge `reach` about x: a CoM lies in its cell.
+  const double r = reach * scale;
+  std::array<int64_t, 3> lo;
+  std::array<int64_t, 3> hi;
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = std::max<int64_t>(0, static_cast<int64_t>(std::floor(std::max(p[a] - r, -1.0))));
+    hi[a] = std::min<int64_t>(cells - 1,
+                              static_cast<int64_t>(std::floor(std::min(p[a] + r, 1.0 * cells))));
+  }
+  const double reach2 = reach * reach;
+  for (int64_t z = lo[2]; z <= hi[2]; ++z) {
+    for (int64_t y = lo[1]; y <= hi[1]; ++y) {
+      for (int64_t c = lo[0]; c <= hi[0]; ++c) {
+        const int32_t j = index_.Find(EncodeMorton<3>(
+            {static_cast<uint32_t>(c), static_cast<uint32_t>(y), static_cast<uint32_t>(z)}));
+        if (j < 0) continue;
+        if ((level.center_of_mass[j].cast<double>() - x).squaredNorm() <= reach2) out.push_back(j);
+      }
+    }
+  }
+}
+
+SurfaceMoments SurfaceKernel::Moments(const Eigen::Vector3d& x, const int32_t* cells,
+                                      size_t count) const {
+  const Octree::Level& level = tree_.level(depth_);
+  const double radius2 = radius_ * radius_;
+  SurfaceMoments m;
+  Eigen::Vector3d first = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d second = Eigen::Matrix3d::Zero();
+  for (size_t k = 0; k < count; ++k) {
+    const int32_t j = cells[k];
+    const Eigen::Vector3d c = level.center_of_mass[j].cast<double>();
+    const double d2 = (c - x).squaredNorm();
+    if (d2 >= radius2) continue;
+    const double u = 1.0 - d2 / radius2;
+    const double n = static_cast<double>(level.count[j]);
+    const double w = n * u * u;
+    m.weight += w;
+    m.points += n;
+    first += w * c;
+    second += w * (tree_.Covariance(depth_, j).cast<double>() + c * c.transpose());
+  }
+  if (m.weight > 0.0) {
+    m.mean = first / m.weight;
+    m.spread = second / m.weight - m.mean * m.mean.transpose();
+  }
+  return m;
+}
+
+SurfaceMoments SurfaceKernel::Moments(const Eigen::Vector3d& x) const {
+  std::vector<int32_t> cells;
+  Gather(x, radius_, cells);
+  return Moments(x, cells.data(), cells.size());
+}
+
+SmoothedNodes SmoothNodes(const Octree& tree, int depth, double radius, size_t max_nodes) {
+  SmoothedNodes smoothed;
+  smoothed.depth = depth;
+  smoothed.radius = radius;
+  const Octree::Level& level = tree.level(depth);
+  if (level.size() == 0 || max_nodes == 0) return smoothed;
+  const CellIndex index(level.morton, depth);
+  const SurfaceKernel kernel(tree, depth, index, radius);
+  const size_t stride = (level.size() + max_nodes - 1) / max_nodes;
+  std::vector<int32_t> cells;
+  for (size_t i = 0; i < level.size(); i += stride) {
+    cells.clear();
+    const Eigen::Vector3d x = level.center_of_mass[i].cast<double>();
+    kernel.Gather(x, radius, cells);
+    smoothed.points.push_back(kernel.Moments(x, cells.data(), cells.size()).mean);
+    smoothed.weights.push_back(static_cast<double>(level.count[i]));
+  }
+  return smoothed;
+}
+
+}  // namespace rpsr::core
