@@ -13,9 +13,11 @@
 // Measured (`rpsr eval --protocol objects --split unseen --count 100 --seed S --disturbance jitter
 // --level 3|4`, recall at (1 deg, 0.01), seeds 1 / 2 / 3): jitter 0.05 0.54 / 0.49 / 0.54 before
 // any polish, 0.66 / 0.67 / 0.63 with session 16's (each node to the nearest target CoM, normals
-// from the 3x3x3 block), 0.75 / 0.70 / 0.73 with this one; jitter 0.08 0.19 / 0.16 / 0.11, 0.46 /
-// 0.44 / 0.45, 0.64 / 0.61 / 0.61. Clean, noise, outliers and crop unchanged (their scatter stays
-// below the threshold). The variants in tests/bench/notes/refinement-notes.md, *The noise polish*.
+// from the 3x3x3 block), 0.74 / 0.71 / 0.73 with this one; jitter 0.08 0.19 / 0.16 / 0.11, 0.46 /
+// 0.44 / 0.45, 0.66 / 0.61 / 0.62. Clean, noise, outliers and crop within a pair (their scatter
+// stays below the threshold on almost every pair;
+// tests/bench/results/noise_polish_smoothed.txt). The variants in
+// tests/bench/notes/refinement-notes.md, *The noise polish*.
 #ifndef RPSR_CORE_REFINE_NOISE_POLISH_H_
 #define RPSR_CORE_REFINE_NOISE_POLISH_H_
 

@@ -233,12 +233,12 @@ struct TreeRefinementOptions {
   double coarse_max_correspondence_distance_cells = 2.0;
   // The noise polish (noise_polish.h): when the source's finest nodes scatter about the
   // target's planes by a median of at least noise_polish_min_scatter_cells finest cell edges
-  // (MedianSurfaceScatterCells, normals read two depths up), a last point-to-plane stage on the
-  // source's own nodes one depth coarser, against the target's CoMs there with normals from the
-  // 3x3x3 block of cells around each; the result's statistics are then measured at the polished
-  // pose. 0.45 lies above the clean unseen objects' 95th percentile (0.37) and near the 5th of
-  // jitter 0.05 (0.43); scans (0.02-0.04) never reach it. Unseen objects, recall at (1 deg, 0.01),
-  // jitter 0.05 / 0.08: 0.54 / 0.19 -> 0.66 / 0.46 (noise_polish.h). The proto's
+  // (MedianSurfaceScatterCells, normals read two depths up), a last point-to-plane stage one
+  // depth coarser on kernel-smoothed surfaces (the source's nodes and the target about them,
+  // smoothed_surface.h); the result's statistics are then measured at the polished pose. 0.45 lies
+  // above the clean unseen objects' 95th percentile (0.37) and near the 5th of jitter 0.05 (0.43);
+  // scans (0.02-0.04) never reach it. Unseen objects, recall at (1 deg, 0.01), jitter 0.05 / 0.08:
+  // 0.54 / 0.19 -> 0.74 / 0.66 (noise_polish.h). The proto's
   // RegisterOptions.noise_polish, the CLI's --noise_polish.
   // It polishes an answer the stages found, and only one where most of the source lies on the
   // target's surface (fitness at least noise_polish_min_fitness): unrelated clouds scatter as much
