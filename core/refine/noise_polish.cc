@@ -21,9 +21,9 @@ struct Partner {
 
 // The occupied target cells of the block around a moved node -- the 3x3x3 cells around its cell,
 // or the 2x2x2 nearest to it (which hold every cell within half a cell edge) -- remembered per
-// node and looked up again only when the node moves to another block (after the first iterations
-// almost never), as the refinement's FindPartner does: the cell-index lookups were most of the
-// polish's time.
+// slot and looked up again only when the node moves to another block, as the refinement's
+// FindPartner does. The scatter measure uses one slot (each node is read once); the polish itself
+// reads kernel-smoothed surfaces (smoothed_surface.h) instead of a nearest partner.
 class BlockCandidates {
  public:
   BlockCandidates(const PlaneLevel& target, size_t nodes, int block)
