@@ -98,43 +98,17 @@ double MedianSurfaceScatterCells(const Octree& source, int source_depth, const P
   return *middle;
 }
 
-namespace {
+PolishSides::PolishSides(const Octree& source_tree, const Octree& target_tree, int depth,
+                         const CellIndex& target_index, const PlanePolishOptions& options)
+    : radius(options.kernel_radius_cells * CellEdge(target_tree, depth)),
+      source(SmoothNodes(source_tree, depth, radius, options.max_nodes)),
+      target(target_tree, depth, target_index, radius),
+      supports(source.points.size(), 0.5 * CellEdge(target_tree, depth)) {}
 
-// The target's cells near each source node, gathered within the kernel's support plus a margin
-// and gathered again only when the node has moved more than the margin from where they were
-// (after the first iterations almost never): the same moments as gathering every time, without
-// the cell-index lookups of the support's 125-216 cells per node and iteration.
-class SupportCache {
- public:
-  SupportCache(const SurfaceKernel& kernel, size_t nodes, double margin)
-      : kernel_(kernel),
-        margin_(margin),
-        anchors_(nodes, Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN())),
-        cells_(nodes) {}
-
-  SurfaceMoments At(size_t k, const Eigen::Vector3d& q) {
-    std::vector<int32_t>& cells = cells_[k];
-    // A NaN anchor (never gathered) fails the comparison.
-    if (!((q - anchors_[k]).squaredNorm() <= margin_ * margin_)) {
-      anchors_[k] = q;
-      cells.clear();
-      kernel_.Gather(q, kernel_.radius() + margin_, cells);
-    }
-    return kernel_.Moments(q, cells.data(), cells.size());
-  }
-
- private:
-  const SurfaceKernel& kernel_;
-  double margin_;
-  std::vector<Eigen::Vector3d> anchors_;
-  std::vector<std::vector<int32_t>> cells_;
-};
-
-}  // namespace
-
-PlanePolishResult PolishPointToPlane(const SmoothedNodes& source, const SurfaceKernel& target,
-                                     const Eigen::Isometry3d& T_target_source,
+PlanePolishResult PolishPointToPlane(PolishSides& sides, const Eigen::Isometry3d& T_target_source,
                                      const PlanePolishOptions& options) {
+  const SmoothedNodes& source = sides.source;
+  const SurfaceKernel& target = sides.target;
   PlanePolishResult result;
   result.T_target_source = T_target_source;
   const double edge = CellEdge(target.tree(), target.depth());
@@ -149,14 +123,13 @@ PlanePolishResult PolishPointToPlane(const SmoothedNodes& source, const SurfaceK
   };
   std::vector<Term> terms;
   terms.reserve(source.points.size());
-  SupportCache supports(target, source.points.size(), 0.5 * edge);
   for (int iteration = 0; iteration < options.max_iterations; ++iteration) {
     terms.clear();
     Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
     double weight_sum = 0.0;
     for (size_t i = 0; i < source.points.size(); ++i) {
       const Eigen::Vector3d q = R * source.points[i] + t;
-      const SurfaceMoments m = supports.At(i, q);
+      const SurfaceMoments m = sides.supports.At(target, i, q);
       if (m.points < options.min_support_points) continue;
       const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(m.spread);
       const Eigen::Vector3d normal = solver.eigenvectors().col(0);

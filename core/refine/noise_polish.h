@@ -95,12 +95,25 @@ struct PlanePolishResult {
   double last_update_translation = 0.0;
 };
 
+// What the polishes of one pair share, whatever their start: the source's nodes of `depth`
+// smoothed (SmoothNodes), the target's kernel at that depth (`target_index` its cell index, valid
+// while this lives) and the supports gathered so far. Both kernels have the options'
+// kernel_radius_cells in cells of the target's level; supports are gathered again after a move of
+// half a cell.
+struct PolishSides {
+  PolishSides(const Octree& source_tree, const Octree& target_tree, int depth,
+              const CellIndex& target_index, const PlanePolishOptions& options = {});
+  double radius;
+  SmoothedNodes source;
+  SurfaceKernel target;
+  SupportCache supports;
+};
+
 // Gauss-Newton on sum_i w_i rho(n(q_i) . (q_i - m(q_i))), q_i = T * s_i for the source's smoothed
 // nodes s_i (w_i: the node's point count), m and n the target kernel's mean and normal about q_i
 // (supports of at least min_support_points). Starts at `T_target_source`; returns it unchanged
-// (iterations 0) when too few nodes find a supported plane.
-PlanePolishResult PolishPointToPlane(const SmoothedNodes& source, const SurfaceKernel& target,
-                                     const Eigen::Isometry3d& T_target_source,
+// (iterations 0) when too few nodes find a supported plane. `options` as `sides` were built with.
+PlanePolishResult PolishPointToPlane(PolishSides& sides, const Eigen::Isometry3d& T_target_source,
                                      const PlanePolishOptions& options = {});
 
 }  // namespace rpsr::core

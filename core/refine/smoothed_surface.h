@@ -38,8 +38,10 @@ class SurfaceKernel {
   // `index` is the level's (valid while this lives); `radius` in the tree's units (> 0).
   SurfaceKernel(const Octree& tree, int depth, const CellIndex& index, double radius);
 
-  // The occupied cells whose CoM lies within `reach` (>= 0) of x, appended to `out` in the
-  // level's cell order (z, y, x ascending).
+  // The occupied cells whose CoM lies within `reach` (>= 0) of x, appended to `out` in ascending
+  // node order. Found through the parent level (a reach of 3 cells spans up to 7^3 cells of this
+  // level but 4^3 of the parent's, whose children the tree lists): the lookups were most of the
+  // polish's time.
   void Gather(const Eigen::Vector3d& x, double reach, std::vector<int32_t>& out) const;
   // The moments about x over `cells` (which must hold every cell within `radius` of x; cells
   // farther out weigh nothing). Zero weight when none is inside the support.
@@ -56,6 +58,28 @@ class SurfaceKernel {
   int depth_;
   const CellIndex& index_;
   double radius_;
+  CellIndex parent_index_;  // depth_ - 1's (depth_ >= 1)
+  // Per cell, in double: its CoM, point count and second moment about the origin
+  // (covariance + CoM CoM^T), read by every kernel sum that reaches it.
+  std::vector<Eigen::Vector3d> com_;
+  std::vector<double> count_;
+  std::vector<Eigen::Matrix3d> second_;
+};
+
+// A kernel's cells near each of a set of query points (a polish's source nodes), gathered within
+// the support plus `margin` and gathered again only when the point has moved more than the margin
+// from where they were: the same moments as gathering every time, without most of the lookups.
+// Kept by the caller across calls with the same kernel (a pair's starts often end near each other).
+class SupportCache {
+ public:
+  SupportCache(size_t points, double margin);
+  // The kernel's moments about q, query point k's (k < points).
+  SurfaceMoments At(const SurfaceKernel& kernel, size_t k, const Eigen::Vector3d& q);
+
+ private:
+  double margin_;
+  std::vector<Eigen::Vector3d> anchors_;  // where each point's cells were gathered (NaN: never)
+  std::vector<std::vector<int32_t>> cells_;
 };
 
 // A source level's nodes smoothed by the kernel in their own frame: pose-free, so a pair's starts

@@ -395,8 +395,8 @@ struct TreeRefinementCache::Impl {
   int fractions_min_count = -1;
   std::optional<double> source_fraction;
   std::optional<double> target_fraction;
-  // The noise polish's smoothed source nodes (one depth; every start on the pair reads them).
-  std::unique_ptr<SmoothedNodes> polish_source;
+  // The noise polish's two sides (one depth; every start on the pair polishes with them).
+  std::unique_ptr<PolishSides> polish_sides;
 
   void BindTo(const Octree& s, const Octree& t) {
     if (source == &s && target == &t) return;
@@ -404,18 +404,16 @@ struct TreeRefinementCache::Impl {
     target = &t;
     sources.clear();
     targets.clear();
-    polish_source.reset();
+    polish_sides.reset();
     fractions_min_count = -1;
   }
 
-  // The noise polish's source nodes at `depth`, smoothed with `radius`.
-  const SmoothedNodes& PolishSourceAt(int depth, double radius, size_t max_nodes) {
-    if (polish_source == nullptr || polish_source->depth != depth ||
-        polish_source->radius != radius) {
-      polish_source =
-          std::make_unique<SmoothedNodes>(SmoothNodes(*source, depth, radius, max_nodes));
+  // The noise polish's sides at `depth` of the bound pair (`index`: the target's there).
+  PolishSides& PolishSidesAt(int depth, const CellIndex& index) {
+    if (polish_sides == nullptr || polish_sides->source.depth != depth) {
+      polish_sides = std::make_unique<PolishSides>(*source, *target, depth, index);
     }
-    return *polish_source;
+    return *polish_sides;
   }
 
   // The options' line rule for the bound pair: as given, or chosen from the trees' fractions
@@ -1332,19 +1330,14 @@ TreeRefinementResult NoisePolish(const Octree& source, const Octree& target,
       result.fitness < options.noise_polish_min_fitness) {
     return result;
   }
-  // Both sides smoothed by the same kernel, its support in cells of the target's level.
-  const PlanePolishOptions polish;
-  const double radius = polish.kernel_radius_cells * CellEdge(target, depth);
-  const SurfaceKernel target_surface(target, depth, shared.Target(depth, shapes).side->index,
-                                     radius);
-  const SmoothedNodes& nodes = shared.PolishSourceAt(depth, radius, polish.max_nodes);
-  const PlanePolishResult polished =
-      PolishPointToPlane(nodes, target_surface, result.T_target_source, polish);
+  // Both sides smoothed by the same kernel (PolishSides), shared by the pair's starts.
+  PolishSides& sides = shared.PolishSidesAt(depth, shared.Target(depth, shapes).side->index);
+  const PlanePolishResult polished = PolishPointToPlane(sides, result.T_target_source);
   if (polished.iterations == 0) return result;
   DepthStage stage;
   stage.depth = depth;
   stage.cell_edge = CellEdge(target, depth);
-  stage.source_nodes = static_cast<int>(nodes.points.size());
+  stage.source_nodes = static_cast<int>(sides.source.points.size());
   stage.correspondences = polished.correspondences;
   stage.iterations = polished.iterations;
   stage.converged = polished.converged;

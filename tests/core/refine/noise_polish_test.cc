@@ -31,11 +31,9 @@ constexpr int kDepth = 6;
 PlanePolishResult Polish(const Octree& source, const Octree& target,
                          const Eigen::Isometry3d& initial, const PlanePolishOptions& options = {}) {
   const int depth = kDepth - 1;
-  const double radius = options.kernel_radius_cells * CellEdge(target, depth);
   const CellIndex index(target.level(depth).morton, depth);
-  const SurfaceKernel surface(target, depth, index, radius);
-  return PolishPointToPlane(SmoothNodes(source, depth, radius, options.max_nodes), surface, initial,
-                            options);
+  PolishSides sides(source, target, depth, index, options);
+  return PolishPointToPlane(sides, initial, options);
 }
 
 // The refinement's measure at the truth, for `pairs` unseen pairs of a jitter level: its median.
