@@ -131,7 +131,10 @@ PlanePolishResult PolishPointToPlane(PolishSides& sides, const Eigen::Isometry3d
       const Eigen::Vector3d q = R * source.points[i] + t;
       const SurfaceMoments m = sides.supports.At(target, i, q);
       if (m.points < options.min_support_points) continue;
-      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(m.spread);
+      // The closed form: a support's spread is a plane's (its least eigenvalue well apart), where
+      // it is as good as the iterative solver and several times faster.
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
+      solver.computeDirect(m.spread);
       const Eigen::Vector3d normal = solver.eigenvectors().col(0);
       const double r = normal.dot(q - m.mean);
       const double g = k2 / (k2 + r * r);
