@@ -131,8 +131,8 @@ PlanePolishResult PolishPointToPlane(PolishSides& sides, const Eigen::Isometry3d
       const Eigen::Vector3d q = R * source.points[i] + t;
       const SurfaceMoments m = sides.supports.At(target, i, q);
       if (m.points < options.min_support_points) continue;
-      // The closed form: a support's spread is a plane's (its least eigenvalue well apart), where
-      // it is as good as the iterative solver and several times faster.
+      // The closed form (a jittered object pair 0.92-0.94x, the same recalls): it loses accuracy
+      // only where the least eigenvalue nears another, where no solver's normal means much.
       Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
       solver.computeDirect(m.spread);
       const Eigen::Vector3d normal = solver.eigenvectors().col(0);
