@@ -19,56 +19,31 @@ struct Partner {
   const Eigen::Vector3d* normal = nullptr;
 };
 
-// The occupied target cells of the block around a moved node -- the 3x3x3 cells around its cell,
-// or the 2x2x2 nearest to it (which hold every cell within half a cell edge) -- remembered per
-// slot and looked up again only when the node moves to another block, as the refinement's
-// FindPartner does. The scatter measure uses one slot (each node is read once); the polish itself
-// reads kernel-smoothed surfaces (smoothed_surface.h) instead of a nearest partner.
-class BlockCandidates {
- public:
-  BlockCandidates(const PlaneLevel& target, size_t nodes, int block)
-      : target_(target),
-        block_(block),
-        home_(nodes, ~uint64_t{0}),
-        candidates_(static_cast<size_t>(block) * nodes, -1) {}
-
-  // The nearest target CoM to q (source node k) in its block, if it has a plane; else the nearest
-  // that has one. Ties go to the lower index (the answer does not depend on the visiting order).
-  Partner Nearest(size_t k, const Eigen::Vector3d& q) {
-    const Octree::Level& level = target_.tree->level(target_.depth);
-    const int64_t cells = int64_t{1} << target_.depth;
-    const BlockHome at = LocateBlockHome(*target_.tree, target_.depth, q);
-    const uint64_t key = (EncodeMorton<3>(at.home) << 3) | (block_ == 8 ? at.side_bits : 0);
-    int32_t* slots = &candidates_[static_cast<size_t>(block_) * k];
-    if (home_[k] != key) {
-      home_[k] = key;
-      FindBlock(*target_.index, at.home, at.side, block_, cells, slots);
+// The nearest target CoM to q among the 3x3x3 cells around its cell, if it has a plane; else the
+// nearest that has one. Ties go to the lower index (the answer does not depend on the visiting
+// order). The scatter measure reads each node once, so nothing is remembered between calls.
+Partner NearestWithPlane(const PlaneLevel& target, const Eigen::Vector3d& q) {
+  const Octree::Level& level = target.tree->level(target.depth);
+  const BlockHome at = LocateBlockHome(*target.tree, target.depth, q);
+  std::array<int32_t, 27> block;
+  FindBlock(*target.index, at.home, at.side, 27, int64_t{1} << target.depth, block.data());
+  // The nearest; only when it has no plane, the nearest of those that have one.
+  for (bool need_plane : {false, true}) {
+    int32_t best = -1;
+    double best_d2 = 0.0;
+    for (const int32_t j : block) {
+      if (j < 0) continue;
+      const double d2 = (level.center_of_mass[j].cast<double>() - q).squaredNorm();
+      if (best >= 0 && (d2 > best_d2 || (d2 == best_d2 && j > best))) continue;
+      if (need_plane && target.normal(j) == nullptr) continue;
+      best = j;
+      best_d2 = d2;
     }
-    // The nearest; only when it has no plane, the nearest of those that have one.
-    for (bool need_plane : {false, true}) {
-      int32_t best = -1;
-      double best_d2 = 0.0;
-      for (int slot = 0; slot < block_; ++slot) {
-        const int32_t j = slots[slot];
-        if (j < 0) continue;
-        const double d2 = (level.center_of_mass[j].cast<double>() - q).squaredNorm();
-        if (best >= 0 && (d2 > best_d2 || (d2 == best_d2 && j > best))) continue;
-        if (need_plane && target_.normal(j) == nullptr) continue;
-        best = j;
-        best_d2 = d2;
-      }
-      if (best < 0) return {};
-      if (const Eigen::Vector3d* normal = target_.normal(best)) return {best, normal};
-    }
-    return {};
+    if (best < 0) return {};
+    if (const Eigen::Vector3d* normal = target.normal(best)) return {best, normal};
   }
-
- private:
-  const PlaneLevel& target_;
-  int block_;
-  std::vector<uint64_t> home_;
-  std::vector<int32_t> candidates_;
-};
+  return {};
+}
 
 }  // namespace
 
@@ -84,10 +59,9 @@ double MedianSurfaceScatterCells(const Octree& source, int source_depth, const P
   // The 3x3x3 block, not the 2x2x2 nearest one: a node a cell off the surface often has no
   // partner within half a cell, and leaving such nodes out would read a jittered cloud as
   // thinner than it is (unseen objects under jitter 0.08: median 0.43 instead of 0.61).
-  BlockCandidates blocks(target, 1, 27);
   for (size_t i = 0; i < level.size(); i += stride) {
     const Eigen::Vector3d q = T_target_source * level.center_of_mass[i].cast<double>();
-    const Partner p = blocks.Nearest(0, q);
+    const Partner p = NearestWithPlane(target, q);
     if (p.node < 0) continue;
     const Eigen::Vector3d offset = q - target_level.center_of_mass[p.node].cast<double>();
     distances.push_back(std::abs(p.normal->dot(offset)) / edge);
@@ -99,10 +73,11 @@ double MedianSurfaceScatterCells(const Octree& source, int source_depth, const P
 }
 
 PolishSides::PolishSides(const Octree& source_tree, const Octree& target_tree, int depth,
-                         const CellIndex& target_index, const PlanePolishOptions& options)
-    : radius(options.kernel_radius_cells * CellEdge(target_tree, depth)),
-      source(SmoothNodes(source_tree, depth, radius, options.max_nodes)),
-      target(target_tree, depth, target_index, radius),
+                         const PlanePolishOptions& options)
+    : source(SmoothNodes(source_tree, depth,
+                         options.kernel_radius_cells * CellEdge(target_tree, depth),
+                         options.max_nodes)),
+      target(target_tree, depth, options.kernel_radius_cells * CellEdge(target_tree, depth)),
       supports(source.points.size(), 0.5 * CellEdge(target_tree, depth)) {}
 
 PlanePolishResult PolishPointToPlane(PolishSides& sides, const Eigen::Isometry3d& T_target_source,

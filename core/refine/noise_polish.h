@@ -96,14 +96,12 @@ struct PlanePolishResult {
 };
 
 // What the polishes of one pair share, whatever their start: the source's nodes of `depth`
-// smoothed (SmoothNodes), the target's kernel at that depth (`target_index` its cell index, valid
-// while this lives) and the supports gathered so far. Both kernels have the options'
-// kernel_radius_cells in cells of the target's level; supports are gathered again after a move of
-// half a cell.
+// smoothed (SmoothNodes), the target's kernel at that depth and the supports gathered so far.
+// Both kernels have the options' kernel_radius_cells in cells of the target's level; supports are
+// gathered again after a move of half a cell.
 struct PolishSides {
   PolishSides(const Octree& source_tree, const Octree& target_tree, int depth,
-              const CellIndex& target_index, const PlanePolishOptions& options = {});
-  double radius;
+              const PlanePolishOptions& options = {});
   SmoothedNodes source;
   SurfaceKernel target;
   SupportCache supports;

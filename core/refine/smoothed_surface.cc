@@ -9,8 +9,8 @@
 
 namespace rpsr::core {
 
-SurfaceKernel::SurfaceKernel(const Octree& tree, int depth, const CellIndex& index, double radius)
-    : tree_(tree), depth_(depth), index_(index), radius_(radius) {
+SurfaceKernel::SurfaceKernel(const Octree& tree, int depth, double radius)
+    : tree_(tree), depth_(depth), radius_(radius) {
   if (depth_ >= 1) parent_index_ = CellIndex(tree_.level(depth_ - 1).morton, depth_ - 1);
   const Octree::Level& level = tree_.level(depth_);
   com_.resize(level.size());
@@ -26,11 +26,17 @@ SurfaceKernel::SurfaceKernel(const Octree& tree, int depth, const CellIndex& ind
 
 void SurfaceKernel::Gather(const Eigen::Vector3d& x, double reach,
                            std::vector<int32_t>& out) const {
-  // Cells of the level searched: the parent level's (children listed by the tree), or at the
-  // root this level's own.
-  const bool via_parent = depth_ >= 1;
-  const int depth = via_parent ? depth_ - 1 : depth_;
-  const CellIndex& index = via_parent ? parent_index_ : index_;
+  const size_t first = out.size();
+  const double reach2 = reach * reach;
+  auto consider = [&](int32_t j) {
+    if ((com_[static_cast<size_t>(j)] - x).squaredNorm() <= reach2) out.push_back(j);
+  };
+  if (depth_ == 0) {  // the root: one cell at most, no parent
+    for (size_t j = 0; j < com_.size(); ++j) consider(static_cast<int32_t>(j));
+    return;
+  }
+  // The parent level's cells, whose children the tree lists.
+  const int depth = depth_ - 1;
   const int64_t cells = int64_t{1} << depth;
   const double scale = static_cast<double>(cells) / (2.0 * tree_.half_length());
   const Eigen::Vector3d p =
@@ -46,22 +52,13 @@ void SurfaceKernel::Gather(const Eigen::Vector3d& x, double reach,
     hi[a] = std::min<int64_t>(cells - 1,
                               static_cast<int64_t>(std::floor(std::min(p[a] + r, 1.0 * cells))));
   }
-  const double reach2 = reach * reach;
-  const size_t first = out.size();
   const std::vector<int32_t>& labels = tree_.level(depth_).labels;
-  auto consider = [&](int32_t j) {
-    if ((com_[static_cast<size_t>(j)] - x).squaredNorm() <= reach2) out.push_back(j);
-  };
   for (int64_t z = lo[2]; z <= hi[2]; ++z) {
     for (int64_t y = lo[1]; y <= hi[1]; ++y) {
       for (int64_t c = lo[0]; c <= hi[0]; ++c) {
-        const int32_t j = index.Find(EncodeMorton<3>(
+        const int32_t j = parent_index_.Find(EncodeMorton<3>(
             {static_cast<uint32_t>(c), static_cast<uint32_t>(y), static_cast<uint32_t>(z)}));
         if (j < 0) continue;
-        if (!via_parent) {
-          consider(j);
-          continue;
-        }
         for (int octant = 0; octant < 8; ++octant) {
           const int32_t child = labels[static_cast<size_t>(j) * 8 + static_cast<size_t>(octant)];
           if (child >= 0) consider(child);
@@ -121,11 +118,9 @@ SurfaceMoments SupportCache::At(const SurfaceKernel& kernel, size_t k, const Eig
 SmoothedNodes SmoothNodes(const Octree& tree, int depth, double radius, size_t max_nodes) {
   SmoothedNodes smoothed;
   smoothed.depth = depth;
-  smoothed.radius = radius;
   const Octree::Level& level = tree.level(depth);
   if (level.size() == 0 || max_nodes == 0) return smoothed;
-  const CellIndex index(level.morton, depth);
-  const SurfaceKernel kernel(tree, depth, index, radius);
+  const SurfaceKernel kernel(tree, depth, radius);
   const size_t stride = (level.size() + max_nodes - 1) / max_nodes;
   std::vector<int32_t> cells;
   for (size_t i = 0; i < level.size(); i += stride) {

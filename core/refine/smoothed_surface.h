@@ -35,8 +35,8 @@ struct SurfaceMoments {
 
 class SurfaceKernel {
  public:
-  // `index` is the level's (valid while this lives); `radius` in the tree's units (> 0).
-  SurfaceKernel(const Octree& tree, int depth, const CellIndex& index, double radius);
+  // `radius` in the tree's units (> 0). Builds the parent level's cell index (Gather).
+  SurfaceKernel(const Octree& tree, int depth, double radius);
 
   // The occupied cells whose CoM lies within `reach` (>= 0) of x, appended to `out` in ascending
   // node order. Found through the parent level (a reach of 3 cells spans up to 7^3 cells of this
@@ -56,9 +56,8 @@ class SurfaceKernel {
  private:
   const Octree& tree_;
   int depth_;
-  const CellIndex& index_;
   double radius_;
-  CellIndex parent_index_;  // depth_ - 1's (depth_ >= 1)
+  CellIndex parent_index_;  // depth_ - 1's (depth_ >= 1; the root level has one cell at most)
   // Per cell, in double: its CoM, point count and second moment about the origin
   // (covariance + CoM CoM^T), read by every kernel sum that reaches it.
   std::vector<Eigen::Vector3d> com_;
@@ -87,7 +86,6 @@ class SupportCache {
 // freedom need a few hundred; a scan's deep level has tens of thousands).
 struct SmoothedNodes {
   int depth = -1;
-  double radius = 0.0;
   std::vector<Eigen::Vector3d> points;  // the kernel's mean about each node's CoM
   std::vector<double> weights;          // the node's point count
 };

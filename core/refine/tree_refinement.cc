@@ -408,10 +408,10 @@ struct TreeRefinementCache::Impl {
     fractions_min_count = -1;
   }
 
-  // The noise polish's sides at `depth` of the bound pair (`index`: the target's there).
-  PolishSides& PolishSidesAt(int depth, const CellIndex& index) {
+  // The noise polish's sides at `depth` of the bound pair.
+  PolishSides& PolishSidesAt(int depth) {
     if (polish_sides == nullptr || polish_sides->source.depth != depth) {
-      polish_sides = std::make_unique<PolishSides>(*source, *target, depth, index);
+      polish_sides = std::make_unique<PolishSides>(*source, *target, depth);
     }
     return *polish_sides;
   }
@@ -1331,7 +1331,7 @@ TreeRefinementResult NoisePolish(const Octree& source, const Octree& target,
     return result;
   }
   // Both sides smoothed by the same kernel (PolishSides), shared by the pair's starts.
-  PolishSides& sides = shared.PolishSidesAt(depth, shared.Target(depth, shapes).side->index);
+  PolishSides& sides = shared.PolishSidesAt(depth);
   const PlanePolishResult polished = PolishPointToPlane(sides, result.T_target_source);
   if (polished.iterations == 0) return result;
   DepthStage stage;

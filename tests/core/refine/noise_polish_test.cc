@@ -31,8 +31,7 @@ constexpr int kDepth = 6;
 PlanePolishResult Polish(const Octree& source, const Octree& target,
                          const Eigen::Isometry3d& initial, const PlanePolishOptions& options = {}) {
   const int depth = kDepth - 1;
-  const CellIndex index(target.level(depth).morton, depth);
-  PolishSides sides(source, target, depth, index, options);
+  PolishSides sides(source, target, depth, options);
   return PolishPointToPlane(sides, initial, options);
 }
 

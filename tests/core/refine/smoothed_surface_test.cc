@@ -39,8 +39,7 @@ double Median(std::vector<double> v) {
 TEST(SmoothedSurfaceTest, MeanLiesOnAJitteredPlane) {
   const Octree tree = RefinementTree(JitteredPlane(20000, 0.03f, 1), kDepth);
   const Octree::Level& level = tree.level(kDepth);
-  const CellIndex index(level.morton, kDepth);
-  const SurfaceKernel kernel(tree, kDepth, index, 2.5 * CellEdge(tree, kDepth));
+  const SurfaceKernel kernel(tree, kDepth, 2.5 * CellEdge(tree, kDepth));
   std::vector<double> com_heights;
   std::vector<double> mean_heights;
   std::vector<double> normal_z;
@@ -72,9 +71,8 @@ TEST(SmoothedSurfaceTest, MeanLiesOnAJitteredPlane) {
 // of the sums, and a point far from every cell has no support.
 TEST(SmoothedSurfaceTest, SupportIsExactlyTheRadius) {
   const Octree tree = RefinementTree(testing_util::Sphere(3000, 2), kDepth);
-  const CellIndex index(tree.level(kDepth).morton, kDepth);
   const double radius = 2.5 * CellEdge(tree, kDepth);
-  const SurfaceKernel kernel(tree, kDepth, index, radius);
+  const SurfaceKernel kernel(tree, kDepth, radius);
   std::mt19937_64 rng(3);
   std::uniform_real_distribution<double> u(-1.2, 1.2);
   int supported = 0;
@@ -100,8 +98,7 @@ TEST(SmoothedSurfaceTest, SupportIsExactlyTheRadius) {
 // through a jittered plane, steps of 1e-4 move the mean by little more than that.
 TEST(SmoothedSurfaceTest, MomentsMoveContinuously) {
   const Octree tree = RefinementTree(JitteredPlane(20000, 0.05f, 4), kDepth);
-  const CellIndex index(tree.level(kDepth).morton, kDepth);
-  const SurfaceKernel kernel(tree, kDepth, index, 2.5 * CellEdge(tree, kDepth));
+  const SurfaceKernel kernel(tree, kDepth, 2.5 * CellEdge(tree, kDepth));
   double largest = 0.0;
   Eigen::Vector3d previous = kernel.Moments(Eigen::Vector3d(-0.5, -0.3, 0.02)).mean;
   for (int k = 1; k <= 5000; ++k) {
@@ -121,8 +118,7 @@ TEST(SmoothedSurfaceTest, BothSidesSagAlike) {
   const Octree source = RefinementTree(testing_util::Sphere(4000, 5), kDepth);
   const Octree target = RefinementTree(testing_util::Sphere(4000, 6), kDepth);
   const double radius = 2.5 * CellEdge(target, kDepth);
-  const CellIndex index(target.level(kDepth).morton, kDepth);
-  const SurfaceKernel kernel(target, kDepth, index, radius);
+  const SurfaceKernel kernel(target, kDepth, radius);
   const SmoothedNodes nodes = SmoothNodes(source, kDepth, radius, 100000);
   ASSERT_EQ(nodes.points.size(), source.level(kDepth).size());
   double smoothed_offset = 0.0;
