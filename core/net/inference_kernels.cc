@@ -14,6 +14,7 @@
 #include "Eigen/Core"
 #include "Eigen/LU"
 #include "Eigen/SVD"
+#include "core/net/rulebook_kernel.h"
 
 namespace rpsr::core::net {
 
@@ -163,45 +164,68 @@ void ConvolveSegment(const float* in, const int64_t* idx, int64_t begin, int64_t
                      OffsetWeights wp, int64_t width, float* dst) {
   const int64_t rows = end - begin;
   // The rulebook: for each of the 27 offsets, the (output row, input row) pairs whose neighbour
-  // is present, laid out offset after offset (a counting sort), in rows of this segment.
+  // is present, laid out offset after offset (a counting sort), in rows of this segment. Each
+  // offset's run has one spare slot: the fill writes every slot it visits and moves on only where
+  // the neighbour is present, so that it does not branch on presence (a coin flip: about half of
+  // the slots are empty), and the spare takes a run's last absent write.
+  std::array<int64_t, 27> count{};
+  for (int64_t i = begin; i < end; ++i) {
+    const int64_t* row = idx + i * 27;
+    for (int k = 0; k < 27; ++k) count[k] += row[k] != empty;
+  }
   std::array<int64_t, 28> start{};
-  for (int64_t i = begin * 27; i < end * 27; ++i) start[i % 27 + 1] += idx[i] != empty;
-  for (int k = 0; k < 27; ++k) start[k + 1] += start[k];
-  // Every slot is written below: no zero-fill.
+  for (int k = 0; k < 27; ++k) start[k + 1] = start[k] + count[k] + 1;
+  // Every slot read is written below: no zero-fill.
   const std::unique_ptr<int32_t[]> pair_out(new int32_t[start[27]]);
   const std::unique_ptr<int32_t[]> pair_in(new int32_t[start[27]]);
   std::array<int64_t, 27> next;
   std::copy(start.begin(), start.begin() + 27, next.begin());
-  bool centre_is_self = rows == in_end - in_begin;
+  bool outside = false;
   for (int64_t i = begin; i < end; ++i) {
+    const int64_t* row = idx + i * 27;
     for (int k = 0; k < 27; ++k) {
-      const int64_t j = idx[i * 27 + k];
-      if (j == empty) {
-        if (k == 13) centre_is_self = false;
-        continue;
-      }
-      TORCH_CHECK(j >= in_begin && j < in_end, "neighbour index ", j, " outside its cloud's rows [",
-                  in_begin, ", ", in_end, ")");
-      if (k == 13 && j - in_begin != i - begin) centre_is_self = false;
+      const int64_t j = row[k];
+      const bool present = j != empty;
+      outside |= present & ((j < in_begin) | (j >= in_end));
       pair_out[next[k]] = static_cast<int32_t>(i - begin);
-      pair_in[next[k]++] = static_cast<int32_t>(j - in_begin);
+      pair_in[next[k]] = static_cast<int32_t>(j - in_begin);
+      next[k] += present;
+    }
+  }
+  if (outside) {
+    for (int64_t i = begin * 27; i < end * 27; ++i) {
+      TORCH_CHECK(idx[i] == empty || (idx[i] >= in_begin && idx[i] < in_end), "neighbour index ",
+                  idx[i], " outside its cloud's rows [", in_begin, ", ", in_end, ")");
     }
   }
   const float* seg_in = in + in_begin * channels;
   float* seg_out = dst + begin * width;
+  // With AVX2 (rulebook_kernel.h) every offset, the centre too, adds its products straight into
+  // the output rows: no gather, no BLAS, no scatter.
+  if (wp.by_offset && RulebookKernelAvailable(width)) {
+    for (int k = 0; k < 27; ++k) {
+      RulebookAddProducts(seg_in, channels, pair_in.get() + start[k], pair_out.get() + start[k],
+                          count[k], wp.data + k * channels * width, width, seg_out);
+    }
+    return;
+  }
   // The centre offset of a same-depth convolution is each node itself: one GEMM straight into
   // the output, with no gather and no scatter.
+  bool centre_is_self = rows == in_end - in_begin;
+  for (int64_t i = begin; i < end && centre_is_self; ++i) {
+    centre_is_self = idx[i * 27 + 13] == in_begin + (i - begin);
+  }
   if (centre_is_self && rows > 0) {
     MultiplyByOffsetBlock(seg_in, rows, channels, wp, 13, width, 1.0f, seg_out);
   }
   // Buffers for the largest offset, uninitialised (every row used is written first).
   int64_t most = 0;
-  for (int k = 0; k < 27; ++k) most = std::max(most, start[k + 1] - start[k]);
+  for (int k = 0; k < 27; ++k) most = std::max(most, count[k]);
   const std::unique_ptr<float[]> gathered(new float[most * channels]);
   const std::unique_ptr<float[]> product(new float[most * width]);
   const RowGather gather = RowGatherFor(channels);
   for (int k = 0; k < 27; ++k) {
-    const int64_t n = start[k + 1] - start[k];
+    const int64_t n = count[k];
     if (n == 0 || (k == 13 && centre_is_self)) continue;
     const int32_t* out_rows = pair_out.get() + start[k];
     const int32_t* in_rows = pair_in.get() + start[k];

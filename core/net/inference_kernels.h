@@ -30,13 +30,14 @@ torch::Tensor GatherRowsOrZero(const torch::Tensor& features, const torch::Tenso
 
 // The tree convolution's linear map, skipping empty neighbours instead of multiplying their
 // zero rows: out[i] = bias + sum over k with neighbors[i, k] present of
-// weight[:, kC:(k+1)C] features[neighbors[i, k]], one BLAS GEMM per offset k (a "rulebook", as
-// sparse convolution libraries do). features [N, C] float, neighbors [M, 27] int64 with N for an
-// empty neighbour, weight [C', 27 C] and bias [C'] (or undefined) as torch::nn::Linear holds
-// them; returns [M, C']. The same sums as Linear over the gathered rows, in another order
-// (equal within float rounding). Why: about half of a tree's neighbour slots are empty (an
-// object's nodes have 14 of 27 present at depth 4, 8.5-13 at depth 3), so half of the gathered
-// GEMM multiplies zeros.
+// weight[:, kC:(k+1)C] features[neighbors[i, k]], the products offset by offset (a "rulebook",
+// as sparse convolution libraries do): with `weight_by_offset` on a CPU with AVX2 and FMA by
+// rulebook_kernel.h's kernel straight into the output rows, elsewhere one BLAS GEMM per offset.
+// features [N, C] float, neighbors [M, 27] int64 with N for an empty neighbour, weight
+// [C', 27 C] and bias [C'] (or undefined) as torch::nn::Linear holds them; returns [M, C']. The
+// same sums as Linear over the gathered rows, in another order (equal within float rounding).
+// Why: about half of a tree's neighbour slots are empty (an object's nodes have 14 of 27 present
+// at depth 4, 8.5-13 at depth 3), so half of the gathered GEMM multiplies zeros.
 // `segments`: the first row of each cloud of a batch and the row count at the end (same-depth
 // rows, neighbours within their cloud), so that each cloud is convolved on its own rows and its
 // result is the same whatever else is in the batch (BLAS chooses kernels by size); empty: one.

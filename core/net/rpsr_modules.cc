@@ -3,15 +3,17 @@
 #include <cmath>
 
 #include "core/net/inference_kernels.h"
+#include "core/net/rulebook_kernel.h"
 
 namespace rpsr::core::net {
 namespace {
 
-// Inputs narrower than this take the gathered GEMM at inference too: 27 GEMMs with an inner
-// dimension of 1 (densities) or 6 (positions) cost more than one over the zero rows (measured,
-// rpsr_net_bench: with every convolution on the rulebook objects took 14.2-14.3 ms a pair, with
-// the depth-5 inputs gathered 13.7; all gathered 14.7; tests/bench/results/
-// rulebook_conv_exploration.txt).
+// With BLAS, inputs narrower than this take the gathered GEMM at inference too: 27 GEMMs with an
+// inner dimension of 1 (densities) or 6 (positions) cost more than one over the zero rows
+// (measured, rpsr_net_bench: with every convolution on the rulebook objects took 14.2-14.3 ms a
+// pair, with the depth-5 inputs gathered 13.7; all gathered 14.7; tests/bench/results/
+// rulebook_conv_exploration.txt). The AVX2 kernel has no per-call cost to amortise and takes
+// them all (tests/bench/notes/speed-notes.md, *An AVX2 rulebook kernel*).
 constexpr int64_t kSparseConvMinChannels = 16;
 
 // Copies `values` into a [rows, cols] int64 tensor, adding `offset` to valid indices and
@@ -115,7 +117,9 @@ torch::Tensor TreeConvImpl::forward(const torch::Tensor& features, const torch::
   // The rulebook computes no gradient: the weights must not want one either (features without
   // a gradient can meet weights that have one, e.g. when an earlier layer is frozen).
   if (UseInferenceKernels(features) && UseInferenceKernels(linear_->weight) &&
-      in_channels_ >= kSparseConvMinChannels && SparseTreeConvAvailable()) {
+      (in_channels_ >= kSparseConvMinChannels ||
+       RulebookKernelAvailable(linear_->weight.size(0))) &&
+      SparseTreeConvAvailable()) {
     return torch::relu(
         norm_->forward(SparseTreeConvLinear(features, neighbors, linear_->weight, linear_->bias,
                                             row_offsets, weight_by_offset_.Of(linear_->weight))));

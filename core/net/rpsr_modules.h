@@ -40,7 +40,8 @@ PackedClouds PackClouds(const std::vector<const NetCloudInput*>& clouds);
 // Tree convolution: gather the 27 neighbours (zero for empty ones), one linear map over the
 // gathered 27 x C_in values (= Conv1d with kernel 27, stride 27, but one GEMM: ~9x faster on CPU,
 // see DEPS.md), BatchNorm, ReLU. At CPU inference, inputs of 16 channels or more skip the empty
-// neighbours instead (SparseTreeConvLinear: one GEMM per offset over the present ones).
+// neighbours instead (SparseTreeConvLinear: the products per offset over the present ones), and
+// every input does where the CPU has the AVX2 rulebook kernel (rulebook_kernel.h).
 class TreeConvImpl : public torch::nn::Module {
  public:
   TreeConvImpl(int64_t in_channels, int64_t out_channels);

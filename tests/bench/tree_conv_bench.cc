@@ -1,10 +1,12 @@
 // One tree convolution at CPU inference, the two ways rpsr computes it: the 27 neighbours
 // gathered into one [N, 27 C] matrix (zero rows for empty ones) and one GEMM, and the rulebook
-// (SparseTreeConvLinear: one GEMM per offset over the neighbours present, each offset's weight
-// block read from the transposed weight TreeConv keeps, as the network runs it). The network takes
-// the rulebook for inputs of 16 channels or more (rpsr_modules.cc); this bench gives the ratio
-// of the two on the machine at hand, on the neighbourhoods of a real 2,048-point object's tree
-// (depth 4: 32 -> 64 channels, depth 3: 64 -> 128, the network's widths).
+// (SparseTreeConvLinear: the products per offset over the neighbours present, each offset's
+// weight block read from the transposed weight TreeConv keeps, as the network runs it), by the
+// AVX2 kernel where the CPU has one (rulebook_kernel.h) or by one BLAS GEMM per offset. The
+// network takes the rulebook for inputs of 16 channels or more, and for all with the AVX2
+// kernel (rpsr_modules.cc); this bench gives the ratios on the machine at hand, on the
+// neighbourhoods of a real 2,048-point object's tree (depth 4: 32 -> 64 channels, depth 3:
+// 64 -> 128, the network's widths).
 #include <torch/torch.h>
 
 #include <cstdlib>
@@ -15,6 +17,7 @@
 #include "core/net/net_input.h"
 #include "core/net/rpsr_modules.h"
 #include "core/net/rpsr_net.h"
+#include "core/net/rulebook_kernel.h"
 #include "tests/bench/bench_clouds.h"
 #include "tests/bench/blas_benchmark_main.h"
 
@@ -70,12 +73,20 @@ void BM_TreeConvGathered(benchmark::State& state) {
 }
 BENCHMARK(BM_TreeConvGathered)->ArgName("depth")->Arg(4)->Arg(3)->Unit(benchmark::kMicrosecond);
 
+// kernel:1 the AVX2 kernel (rulebook_kernel.h; skipped on CPUs without it), kernel:0 the BLAS
+// GEMM per offset it replaced where it runs.
 void BM_TreeConvRulebook(benchmark::State& state) {
   if (!SparseTreeConvAvailable()) {
     state.SkipWithError("the loaded BLAS exports no sgemm_");
     return;
   }
   ConvCase& c = CaseAt(static_cast<int>(state.range(0)));
+  const bool kernel = state.range(1) != 0;
+  if (kernel && !RulebookKernelAvailable(c.linear->weight.size(0))) {
+    state.SkipWithError("no AVX2 and FMA on this CPU");
+    return;
+  }
+  SetRulebookKernelEnabled(kernel);
   torch::NoGradGuard no_grad;
   for (auto _ : state) {
     torch::Tensor out =
@@ -83,9 +94,13 @@ void BM_TreeConvRulebook(benchmark::State& state) {
                              c.weight_by_offset.Of(c.linear->weight));
     benchmark::DoNotOptimize(out.data_ptr<float>());
   }
+  SetRulebookKernelEnabled(true);
   Counters(state, c);
 }
-BENCHMARK(BM_TreeConvRulebook)->ArgName("depth")->Arg(4)->Arg(3)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_TreeConvRulebook)
+    ->ArgNames({"depth", "kernel"})
+    ->ArgsProduct({{4, 3}, {1, 0}})
+    ->Unit(benchmark::kMicrosecond);
 
 }  // namespace
 }  // namespace rpsr::core::net

@@ -1,0 +1,110 @@
+#include "core/net/rulebook_kernel.h"
+
+#include <immintrin.h>
+
+#include <atomic>
+
+namespace rpsr::core::net {
+
+namespace {
+
+std::atomic<bool> kernel_enabled{true};
+
+bool CpuHasAvx2Fma() {
+  static const bool has = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+  return has;
+}
+
+// Only the functions below are compiled for AVX2 and FMA; the project's baseline stays x86-64,
+// and they run only where CpuHasAvx2Fma() said so.
+#pragma GCC push_options
+#pragma GCC target("avx2,fma")
+
+// kRows output rows (distinct) += their input rows times `block`, 16 columns at a time: 2 x kRows
+// accumulators, the block's two column vectors and one broadcast input value in registers
+// (15 of AVX2's 16 for six rows).
+template <int kRows>
+void AddRowsTimesBlock(const float* const* a, float* const* o, int64_t channels, const float* block,
+                       int64_t width) {
+  for (int64_t col = 0; col < width; col += 16) {
+    __m256 lo[kRows], hi[kRows];
+    for (int r = 0; r < kRows; ++r) {
+      lo[r] = _mm256_loadu_ps(o[r] + col);
+      hi[r] = _mm256_loadu_ps(o[r] + col + 8);
+    }
+    const float* w = block + col;
+    for (int64_t c = 0; c < channels; ++c, w += width) {
+      const __m256 w_lo = _mm256_loadu_ps(w);
+      const __m256 w_hi = _mm256_loadu_ps(w + 8);
+      for (int r = 0; r < kRows; ++r) {
+        const __m256 x = _mm256_broadcast_ss(a[r] + c);
+        lo[r] = _mm256_fmadd_ps(x, w_lo, lo[r]);
+        hi[r] = _mm256_fmadd_ps(x, w_hi, hi[r]);
+      }
+    }
+    for (int r = 0; r < kRows; ++r) {
+      _mm256_storeu_ps(o[r] + col, lo[r]);
+      _mm256_storeu_ps(o[r] + col + 8, hi[r]);
+    }
+  }
+}
+
+void AddProducts(const float* in, int64_t channels, const int32_t* in_rows, const int32_t* out_rows,
+                 int64_t n, const float* block, int64_t width, float* out) {
+  constexpr int kGroup = 6;
+  const float* a[kGroup];
+  float* o[kGroup];
+  int64_t p = 0;
+  for (; p + kGroup <= n; p += kGroup) {
+    for (int r = 0; r < kGroup; ++r) {
+      a[r] = in + static_cast<int64_t>(in_rows[p + r]) * channels;
+      o[r] = out + static_cast<int64_t>(out_rows[p + r]) * width;
+    }
+    AddRowsTimesBlock<kGroup>(a, o, channels, block, width);
+  }
+  const int left = static_cast<int>(n - p);
+  for (int r = 0; r < left; ++r) {
+    a[r] = in + static_cast<int64_t>(in_rows[p + r]) * channels;
+    o[r] = out + static_cast<int64_t>(out_rows[p + r]) * width;
+  }
+  switch (left) {
+    case 5:
+      AddRowsTimesBlock<5>(a, o, channels, block, width);
+      break;
+    case 4:
+      AddRowsTimesBlock<4>(a, o, channels, block, width);
+      break;
+    case 3:
+      AddRowsTimesBlock<3>(a, o, channels, block, width);
+      break;
+    case 2:
+      AddRowsTimesBlock<2>(a, o, channels, block, width);
+      break;
+    case 1:
+      AddRowsTimesBlock<1>(a, o, channels, block, width);
+      break;
+    default:
+      break;
+  }
+}
+
+#pragma GCC pop_options
+
+}  // namespace
+
+bool RulebookKernelAvailable(int64_t width) {
+  return width > 0 && width % 16 == 0 && kernel_enabled.load(std::memory_order_relaxed) &&
+         CpuHasAvx2Fma();
+}
+
+void SetRulebookKernelEnabled(bool enabled) {
+  kernel_enabled.store(enabled, std::memory_order_relaxed);
+}
+
+void RulebookAddProducts(const float* in, int64_t channels, const int32_t* in_rows,
+                         const int32_t* out_rows, int64_t n, const float* block, int64_t width,
+                         float* out) {
+  AddProducts(in, channels, in_rows, out_rows, n, block, width, out);
+}
+
+}  // namespace rpsr::core::net
