@@ -2,6 +2,7 @@
 
 #include <cmath>
 
+#include "core/net/dense_at_inference.h"
 #include "core/net/inference_kernels.h"
 #include "core/net/rulebook_kernel.h"
 
@@ -179,7 +180,7 @@ torch::Tensor HierarchicalEncoderImpl::forward(const PackedClouds& clouds) {
                               ? GatherRowsOrZero(fused, clouds.token_node)
                               : WithZeroRow(fused).index_select(0, clouds.token_node.reshape({-1})))
                              .reshape({clouds.batch, kNetTokens, fused.size(1)});
-  torch::Tensor embedded = to_embedding_->forward(tokens);
+  torch::Tensor embedded = LinearAtInference(tokens, *to_embedding_, to_embedding_t_);
   // Empty tokens stay exactly zero (the bias would otherwise make them look alike and real).
   return embedded.masked_fill(clouds.token_empty.unsqueeze(-1), 0.0);
 }
@@ -188,6 +189,18 @@ namespace {
 torch::nn::Sequential FeedForward(int64_t width, int64_t hidden) {
   return torch::nn::Sequential(torch::nn::Linear(width, hidden), torch::nn::ReLU(),
                                torch::nn::Linear(hidden, width));
+}
+// The feed-forward block at inference: its two Linear layers through the kernel where it runs
+// (dense_at_inference.h), the module's forward elsewhere.
+torch::Tensor FeedForwardAt(torch::nn::Sequential& block, const torch::Tensor& x,
+                            std::array<TransposedWeightCache, 2>& weights_t) {
+  auto* first = block->ptr(0)->as<torch::nn::LinearImpl>();
+  auto* second = block->ptr(2)->as<torch::nn::LinearImpl>();
+  if (first == nullptr || second == nullptr || !DenseAtInferenceAvailable(x, first->weight)) {
+    return block->forward(x);
+  }
+  return LinearAtInference(torch::relu(LinearAtInference(x, *first, weights_t[0])), *second,
+                           weights_t[1]);
 }
 torch::nn::LayerNorm Norm(int64_t width) {
   return torch::nn::LayerNorm(torch::nn::LayerNormOptions({width}));
@@ -214,24 +227,26 @@ torch::Tensor ContextTransformerImpl::Memory(const torch::Tensor& y, const torch
   // Sequence-first [T, B, E].
   torch::Tensor memory = y.transpose(0, 1);
   torch::Tensor n = enc_norm1_->forward(memory);
-  memory = memory + std::get<0>(enc_attention_->forward(n, n, n, y_empty, false));
-  return memory + enc_feedforward_->forward(enc_norm2_->forward(memory));
+  memory = memory + MultiheadAttentionAtInference(*enc_attention_, n, n, y_empty, enc_attention_t_);
+  return memory + FeedForwardAt(enc_feedforward_, enc_norm2_->forward(memory), enc_feedforward_t_);
 }
 
 torch::Tensor ContextTransformerImpl::SelfAttended(const torch::Tensor& x,
                                                    const torch::Tensor& x_empty) {
   torch::Tensor z = x.transpose(0, 1);
   torch::Tensor n = dec_norm1_->forward(z);
-  return z + std::get<0>(dec_self_attention_->forward(n, n, n, x_empty, false));
+  return z +
+         MultiheadAttentionAtInference(*dec_self_attention_, n, n, x_empty, dec_self_attention_t_);
 }
 
 torch::Tensor ContextTransformerImpl::Attend(const torch::Tensor& self_attended,
                                              const torch::Tensor& memory,
                                              const torch::Tensor& memory_empty) {
   torch::Tensor n = dec_norm2_->forward(self_attended);
-  torch::Tensor z = self_attended + std::get<0>(dec_cross_attention_->forward(n, memory, memory,
-                                                                              memory_empty, false));
-  z = z + dec_feedforward_->forward(dec_norm3_->forward(z));
+  torch::Tensor z =
+      self_attended + MultiheadAttentionAtInference(*dec_cross_attention_, n, memory, memory_empty,
+                                                    dec_cross_attention_t_);
+  z = z + FeedForwardAt(dec_feedforward_, dec_norm3_->forward(z), dec_feedforward_t_);
   return z.transpose(0, 1);
 }
 

@@ -12,6 +12,7 @@
 #include <array>
 #include <vector>
 
+#include "core/net/dense_at_inference.h"
 #include "core/net/inference_kernels.h"
 #include "core/net/net_input.h"
 #include "core/net/rpsr_net.h"
@@ -84,6 +85,7 @@ class HierarchicalEncoderImpl : public torch::nn::Module {
   FeatureBranch position_branch_{nullptr};
   FeatureBranch density_branch_{nullptr};
   torch::nn::Linear to_embedding_{nullptr};
+  TransposedWeightCache to_embedding_t_;  // its weight.t() for dense_at_inference.h
 };
 TORCH_MODULE(HierarchicalEncoder);
 
@@ -110,6 +112,9 @@ class ContextTransformerImpl : public torch::nn::Module {
   torch::nn::LayerNorm dec_norm1_{nullptr}, dec_norm2_{nullptr}, dec_norm3_{nullptr};
   torch::nn::MultiheadAttention dec_self_attention_{nullptr}, dec_cross_attention_{nullptr};
   torch::nn::Sequential dec_feedforward_{nullptr};
+  // The weights' transposes for the CPU inference path (dense_at_inference.h).
+  AttentionWeightsT enc_attention_t_, dec_self_attention_t_, dec_cross_attention_t_;
+  std::array<TransposedWeightCache, 2> enc_feedforward_t_, dec_feedforward_t_;
 };
 TORCH_MODULE(ContextTransformer);
 

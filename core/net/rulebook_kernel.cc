@@ -20,12 +20,12 @@ bool CpuHasAvx2Fma() {
 #pragma GCC push_options
 #pragma GCC target("avx2,fma")
 
-// kRows output rows (distinct) += their input rows times `block`, 16 columns at a time: 2 x kRows
-// accumulators, the block's two column vectors and one broadcast input value in registers
-// (15 of AVX2's 16 for six rows).
+// kRows output rows (distinct) += their input rows times `block` (rows `ldb` floats apart), 16
+// columns at a time: 2 x kRows accumulators, the block's two column vectors and one broadcast
+// input value in registers (15 of AVX2's 16 for six rows).
 template <int kRows>
 void AddRowsTimesBlock(const float* const* a, float* const* o, int64_t channels, const float* block,
-                       int64_t width) {
+                       int64_t ldb, int64_t width) {
   for (int64_t col = 0; col < width; col += 16) {
     __m256 lo[kRows], hi[kRows];
     for (int r = 0; r < kRows; ++r) {
@@ -33,7 +33,7 @@ void AddRowsTimesBlock(const float* const* a, float* const* o, int64_t channels,
       hi[r] = _mm256_loadu_ps(o[r] + col + 8);
     }
     const float* w = block + col;
-    for (int64_t c = 0; c < channels; ++c, w += width) {
+    for (int64_t c = 0; c < channels; ++c, w += ldb) {
       const __m256 w_lo = _mm256_loadu_ps(w);
       const __m256 w_hi = _mm256_loadu_ps(w + 8);
       for (int r = 0; r < kRows; ++r) {
@@ -49,43 +49,57 @@ void AddRowsTimesBlock(const float* const* a, float* const* o, int64_t channels,
   }
 }
 
-void AddProducts(const float* in, int64_t channels, const int32_t* in_rows, const int32_t* out_rows,
-                 int64_t n, const float* block, int64_t width, float* out) {
+// Pairs p < n, six at a time and the rest by a kernel of their count; `rows(p, a, o)` sets pair
+// p's input and output row pointers.
+template <typename Rows>
+void AddProducts(int64_t n, int64_t channels, const float* block, int64_t ldb, int64_t width,
+                 Rows rows) {
   constexpr int kGroup = 6;
   const float* a[kGroup];
   float* o[kGroup];
   int64_t p = 0;
   for (; p + kGroup <= n; p += kGroup) {
-    for (int r = 0; r < kGroup; ++r) {
-      a[r] = in + static_cast<int64_t>(in_rows[p + r]) * channels;
-      o[r] = out + static_cast<int64_t>(out_rows[p + r]) * width;
-    }
-    AddRowsTimesBlock<kGroup>(a, o, channels, block, width);
+    for (int r = 0; r < kGroup; ++r) rows(p + r, a[r], o[r]);
+    AddRowsTimesBlock<kGroup>(a, o, channels, block, ldb, width);
   }
   const int left = static_cast<int>(n - p);
-  for (int r = 0; r < left; ++r) {
-    a[r] = in + static_cast<int64_t>(in_rows[p + r]) * channels;
-    o[r] = out + static_cast<int64_t>(out_rows[p + r]) * width;
-  }
+  for (int r = 0; r < left; ++r) rows(p + r, a[r], o[r]);
   switch (left) {
     case 5:
-      AddRowsTimesBlock<5>(a, o, channels, block, width);
+      AddRowsTimesBlock<5>(a, o, channels, block, ldb, width);
       break;
     case 4:
-      AddRowsTimesBlock<4>(a, o, channels, block, width);
+      AddRowsTimesBlock<4>(a, o, channels, block, ldb, width);
       break;
     case 3:
-      AddRowsTimesBlock<3>(a, o, channels, block, width);
+      AddRowsTimesBlock<3>(a, o, channels, block, ldb, width);
       break;
     case 2:
-      AddRowsTimesBlock<2>(a, o, channels, block, width);
+      AddRowsTimesBlock<2>(a, o, channels, block, ldb, width);
       break;
     case 1:
-      AddRowsTimesBlock<1>(a, o, channels, block, width);
+      AddRowsTimesBlock<1>(a, o, channels, block, ldb, width);
       break;
     default:
       break;
   }
+}
+
+void AddPairProducts(const float* in, int64_t channels, const int32_t* in_rows,
+                     const int32_t* out_rows, int64_t n, const float* block, int64_t width,
+                     float* out) {
+  AddProducts(n, channels, block, width, width, [&](int64_t p, const float*& a, float*& o) {
+    a = in + static_cast<int64_t>(in_rows[p]) * channels;
+    o = out + static_cast<int64_t>(out_rows[p]) * width;
+  });
+}
+
+void AddDenseProducts(const float* in, int64_t channels, int64_t n, const float* block, int64_t ldb,
+                      int64_t width, float* out) {
+  AddProducts(n, channels, block, ldb, width, [&](int64_t p, const float*& a, float*& o) {
+    a = in + p * channels;
+    o = out + p * width;
+  });
 }
 
 #pragma GCC pop_options
@@ -104,7 +118,12 @@ void SetRulebookKernelEnabled(bool enabled) {
 void RulebookAddProducts(const float* in, int64_t channels, const int32_t* in_rows,
                          const int32_t* out_rows, int64_t n, const float* block, int64_t width,
                          float* out) {
-  AddProducts(in, channels, in_rows, out_rows, n, block, width, out);
+  AddPairProducts(in, channels, in_rows, out_rows, n, block, width, out);
+}
+
+void DenseAddProducts(const float* in, int64_t channels, int64_t n, const float* block, int64_t ldb,
+                      int64_t width, float* out) {
+  AddDenseProducts(in, channels, n, block, ldb, width, out);
 }
 
 }  // namespace rpsr::core::net

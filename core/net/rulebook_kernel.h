@@ -21,6 +21,13 @@ namespace rpsr::core::net {
 // a positive multiple of 16, and the kernel is enabled. Otherwise callers keep the BLAS path.
 bool RulebookKernelAvailable(int64_t width);
 
+// The same kernel over dense rows: for each r < n, out[r] (`width` floats, rows `width` apart)
+// += in[r] (`channels` floats, rows `channels` apart) * block, whose rows lie `ldb` floats apart
+// (ldb >= width: a column slice of a wider matrix). A Linear layer's x W^T with block = W^T.
+// Requires RulebookKernelAvailable(width).
+void DenseAddProducts(const float* in, int64_t channels, int64_t n, const float* block, int64_t ldb,
+                      int64_t width, float* out);
+
 // On by default. Off, SparseTreeConvLinear takes its BLAS path everywhere: for tests and
 // benchmarks that compare the two on one host (tree_conv_bench). Process-wide.
 void SetRulebookKernelEnabled(bool enabled);
