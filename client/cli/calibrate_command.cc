@@ -133,6 +133,23 @@ int RunCalibrateCommand(const std::vector<std::string>& /*args*/) {
                  "--evaluate the prefix of the result files)\n");
     return 2;
   }
+  // What calibrate measures is fixed: the shipped pipeline in all three modes with their default
+  // passes and options, on its own seeded pair sets (--pair_seed, --object_pairs, --lidar_pairs).
+  // A flag that would change either is refused rather than silently ignored: a confidence
+  // measured on other settings than the user meant would mislead.
+  const std::vector<std::string> refused =
+      GivenAmong({"mode", "passes", "refine_from_initial", "search_scene_start",
+                  "rebin_coarse_depths", "joint_finest_stage", "noise_polish", "coarse_wide_search",
+                  "line_normals_from_planes", "hold_degenerate_at_initial", "tree_depth",
+                  "protocol", "seed", "num_points", "count", "split", "disturbance", "level"});
+  if (!refused.empty()) {
+    std::fprintf(stderr,
+                 "rpsr calibrate does not take %s: it measures the shipped pipeline (modes net, "
+                 "net+refine and refine with their defaults) on its own seeded pairs; choose "
+                 "them with --pair_seed, --object_pairs, --lidar_pairs and --unrelated_pairs\n",
+                 absl::StrJoin(refused, ", ").c_str());
+    return 2;
+  }
   const bool evaluate = absl::GetFlag(FLAGS_evaluate);
   if (!evaluate && !absl::GetFlag(FLAGS_confidence).empty()) {
     std::fprintf(stderr, "rpsr calibrate: --confidence only goes with --evaluate\n");

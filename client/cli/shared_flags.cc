@@ -8,6 +8,7 @@
 #include "absl/flags/flag.h"
 #include "absl/flags/internal/parse.h"
 #include "absl/strings/ascii.h"
+#include "absl/strings/str_cat.h"
 #include "core/registrar/embedded_models.h"
 
 ABSL_FLAG(std::string, output, "",
@@ -112,6 +113,14 @@ void ApplyRegistrationFlags(core::RegistrationOptions& options) {
 // record of the flags it saw is the same answer.
 bool GivenOnCommandLine(const char* name) {
   return absl::flags_internal::WasPresentOnCommandLine(name);
+}
+
+std::vector<std::string> GivenAmong(std::initializer_list<const char*> names) {
+  std::vector<std::string> given;
+  for (const char* name : names) {
+    if (GivenOnCommandLine(name)) given.push_back(absl::StrCat("--", name));
+  }
+  return given;
 }
 
 std::optional<bool> ExplicitLineNormalsFlag() {

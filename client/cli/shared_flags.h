@@ -6,8 +6,10 @@
 #define RPSR_CLIENT_CLI_SHARED_FLAGS_H_
 
 #include <cstdint>
+#include <initializer_list>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "absl/flags/declare.h"
 #include "core/data/disturbances.h"
@@ -56,6 +58,11 @@ void ApplyRegistrationFlags(core::RegistrationOptions& options);
 // Whether the flag `name` was given on the command line (a subcommand then uses it as given
 // instead of choosing itself).
 bool GivenOnCommandLine(const char* name);
+
+// The flags of `names` given on the command line, as "--name", in the order of `names`: for a
+// subcommand that refuses flags it would otherwise ignore (rpsr calibrate measures the shipped
+// pipeline and its own pair sets).
+std::vector<std::string> GivenAmong(std::initializer_list<const char*> names);
 
 // --line_normals_from_planes when given on the command line; nullopt (the refinement chooses per
 // pair) when not.

@@ -1,6 +1,6 @@
 // End to end: `rpsr data pairs` writes a manifest, `rpsr eval` registers it with the shipped model
 // and writes per-pair rows and summaries whose numbers agree with each other; `rpsr register` picks
-// an object's tree depth whatever its units.
+// an object's tree depth whatever its units; `rpsr calibrate` refuses flags it would ignore.
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -162,6 +162,18 @@ TEST_F(EvalCommandTest, BadInputSaysWhatToFix) {
   EXPECT_EQ(Run(absl::StrCat("eval --manifest ", Path("none.csv"), " --output ", Path("x.csv"))),
             1);
   EXPECT_THAT(stderr_, HasSubstr("none.csv"));
+}
+
+// calibrate measures the shipped pipeline on its own pairs: a flag that would change either is
+// refused, named, with the flags that do choose the pairs; nothing is written.
+TEST_F(EvalCommandTest, CalibrateRefusesFlagsItWouldIgnore) {
+  const std::string out = Path("calibration.txt");
+  EXPECT_EQ(Run(absl::StrCat("calibrate --passes 1 --seed 5 --output ", out)), 2);
+  EXPECT_THAT(stderr_, HasSubstr("does not take --passes, --seed"));
+  EXPECT_THAT(stderr_, HasSubstr("--pair_seed"));
+  EXPECT_EQ(Run(absl::StrCat("calibrate --evaluate --noise_polish=false --output ", out)), 2);
+  EXPECT_THAT(stderr_, HasSubstr("--noise_polish"));
+  EXPECT_FALSE(fs::exists(out));
 }
 
 }  // namespace
