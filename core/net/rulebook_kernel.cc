@@ -1,6 +1,8 @@
 #include "core/net/rulebook_kernel.h"
 
+#include <dlfcn.h>
 #include <immintrin.h>
+#include <strings.h>
 
 #include <atomic>
 
@@ -8,11 +10,20 @@ namespace rpsr::core::net {
 
 namespace {
 
-std::atomic<bool> kernel_enabled{true};
+std::atomic<RulebookKernelUse> kernel_use{RulebookKernelUse::kAuto};
 
 bool CpuHasAvx2Fma() {
   static const bool has = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
   return has;
+}
+
+// OpenBLAS's chosen core, looked up at run time as blas_info.cc does (LibTorch links the BLAS);
+// null when the BLAS is not OpenBLAS.
+const char* OpenBlasCore() {
+  using NameFunction = char* (*)();
+  const auto corename =
+      reinterpret_cast<NameFunction>(dlsym(RTLD_DEFAULT, "openblas_get_corename"));
+  return corename != nullptr ? corename() : nullptr;
 }
 
 // Only the functions below are compiled for AVX2 and FMA; the project's baseline stays x86-64,
@@ -106,13 +117,47 @@ void AddDenseProducts(const float* in, int64_t channels, int64_t n, const float*
 
 }  // namespace
 
-bool RulebookKernelAvailable(int64_t width) {
-  return width > 0 && width % 16 == 0 && kernel_enabled.load(std::memory_order_relaxed) &&
-         CpuHasAvx2Fma();
+bool RulebookKernelSupported() { return CpuHasAvx2Fma(); }
+
+bool AutoChoosesRulebookKernel(bool cpu_has_avx2_fma, const char* openblas_core) {
+  if (!cpu_has_avx2_fma) return false;
+  if (openblas_core == nullptr) return true;
+  for (const char* avx512 : {"skylakex", "cooperlake", "sapphirerapids"}) {
+    if (strcasecmp(openblas_core, avx512) == 0) return false;  // its small-matrix kernels
+  }
+  return true;
 }
 
-void SetRulebookKernelEnabled(bool enabled) {
-  kernel_enabled.store(enabled, std::memory_order_relaxed);
+void SetRulebookKernelUse(RulebookKernelUse use) {
+  kernel_use.store(use, std::memory_order_relaxed);
+}
+
+namespace {
+bool KernelChosen() {
+  switch (kernel_use.load(std::memory_order_relaxed)) {
+    case RulebookKernelUse::kOn:
+      return CpuHasAvx2Fma();
+    case RulebookKernelUse::kOff:
+      return false;
+    case RulebookKernelUse::kAuto:
+      break;
+  }
+  static const bool chosen = AutoChoosesRulebookKernel(CpuHasAvx2Fma(), OpenBlasCore());
+  return chosen;
+}
+}  // namespace
+
+bool RulebookKernelAvailable(int64_t width) {
+  return width > 0 && width % 16 == 0 && KernelChosen();
+}
+
+const char* RulebookKernelDescription() {
+  if (KernelChosen()) return "rpsr AVX2 kernel";
+  if (!CpuHasAvx2Fma()) return "BLAS (no AVX2 and FMA for rpsr's kernel)";
+  if (kernel_use.load(std::memory_order_relaxed) == RulebookKernelUse::kOff) {
+    return "BLAS (rpsr's kernel turned off)";
+  }
+  return "BLAS (OpenBLAS's AVX-512 small-matrix kernels)";
 }
 
 void RulebookAddProducts(const float* in, int64_t channels, const int32_t* in_rows,

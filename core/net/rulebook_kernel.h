@@ -17,9 +17,29 @@
 
 namespace rpsr::core::net {
 
-// Whether RulebookAddProducts runs here: the CPU has AVX2 and FMA, `width` (output channels) is
-// a positive multiple of 16, and the kernel is enabled. Otherwise callers keep the BLAS path.
+// Where the kernel runs (SetRulebookKernelUse). kAuto, the default: on CPUs with AVX2 and FMA,
+// unless the loaded BLAS is OpenBLAS running its AVX-512 kernels (SkylakeX, Cooperlake,
+// SapphireRapids), whose small-matrix GEMMs skip the packing: there the BLAS path ran an object's
+// depth-4 / depth-3 convolution in 301-317 / 101-103 us (session 19's Intel host), this kernel
+// 414 / 175 us on an AVX2 host of about the same AVX2 peak, i.e. likely slower there. kOn: wherever
+// the CPU can run it (tests, and benchmarks comparing both on one host). kOff: never.
+enum class RulebookKernelUse { kAuto, kOn, kOff };
+void SetRulebookKernelUse(RulebookKernelUse use);  // process-wide
+
+// Whether the CPU can run the kernel (AVX2 and FMA).
+bool RulebookKernelSupported();
+
+// kAuto's rule, given the CPU's AVX2-and-FMA and OpenBLAS's chosen core (openblas_get_corename;
+// null when the BLAS is not OpenBLAS). Separate so that tests can state it for any host.
+bool AutoChoosesRulebookKernel(bool cpu_has_avx2_fma, const char* openblas_core);
+
+// Whether RulebookAddProducts and DenseAddProducts run here for `width` output channels: the
+// kernel is chosen (above) and `width` is a positive multiple of 16. Otherwise callers keep the
+// BLAS path.
 bool RulebookKernelAvailable(int64_t width);
+
+// In words, for benchmark headers and logs: "rpsr AVX2 kernel", or why the BLAS does the work.
+const char* RulebookKernelDescription();
 
 // The same kernel over dense rows: for each r < n, out[r] (`width` floats, rows `width` apart)
 // += in[r] (`channels` floats, rows `channels` apart) * block, whose rows lie `ldb` floats apart
@@ -27,10 +47,6 @@ bool RulebookKernelAvailable(int64_t width);
 // Requires RulebookKernelAvailable(width).
 void DenseAddProducts(const float* in, int64_t channels, int64_t n, const float* block, int64_t ldb,
                       int64_t width, float* out);
-
-// On by default. Off, SparseTreeConvLinear takes its BLAS path everywhere: for tests and
-// benchmarks that compare the two on one host (tree_conv_bench). Process-wide.
-void SetRulebookKernelEnabled(bool enabled);
 
 // For each pair p < n: out[out_rows[p]] += in[in_rows[p]] * block, where rows of `in` hold
 // `channels` floats, rows of `out` `width` floats, and `block` is a row-major [channels, width]

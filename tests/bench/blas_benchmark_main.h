@@ -5,16 +5,18 @@
 
 #include "benchmark/benchmark.h"
 #include "core/net/blas_info.h"
+#include "core/net/rulebook_kernel.h"
 
-#define RPSR_BENCHMARK_MAIN_WITH_BLAS()                                      \
-  int main(int argc, char** argv) {                                          \
-    benchmark::AddCustomContext("blas", rpsr::core::net::BlasDescription()); \
-    benchmark::Initialize(&argc, argv);                                      \
-    if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;        \
-    benchmark::RunSpecifiedBenchmarks();                                     \
-    benchmark::Shutdown();                                                   \
-    return 0;                                                                \
-  }                                                                          \
+#define RPSR_BENCHMARK_MAIN_WITH_BLAS()                                                            \
+  int main(int argc, char** argv) {                                                                \
+    benchmark::AddCustomContext("blas", rpsr::core::net::BlasDescription());                       \
+    benchmark::AddCustomContext("network products", rpsr::core::net::RulebookKernelDescription()); \
+    benchmark::Initialize(&argc, argv);                                                            \
+    if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;                              \
+    benchmark::RunSpecifiedBenchmarks();                                                           \
+    benchmark::Shutdown();                                                                         \
+    return 0;                                                                                      \
+  }                                                                                                \
   static_assert(true, "a semicolon follows the macro")
 
 #endif  // RPSR_TESTS_BENCH_BLAS_BENCHMARK_MAIN_H_

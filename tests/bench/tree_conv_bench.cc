@@ -74,7 +74,7 @@ void BM_TreeConvGathered(benchmark::State& state) {
 BENCHMARK(BM_TreeConvGathered)->ArgName("depth")->Arg(4)->Arg(3)->Unit(benchmark::kMicrosecond);
 
 // kernel:1 the AVX2 kernel (rulebook_kernel.h; skipped on CPUs without it), kernel:0 the BLAS
-// GEMM per offset it replaced where it runs.
+// GEMM per offset, whichever the network takes here (the header's "network products" says).
 void BM_TreeConvRulebook(benchmark::State& state) {
   if (!SparseTreeConvAvailable()) {
     state.SkipWithError("the loaded BLAS exports no sgemm_");
@@ -82,11 +82,11 @@ void BM_TreeConvRulebook(benchmark::State& state) {
   }
   ConvCase& c = CaseAt(static_cast<int>(state.range(0)));
   const bool kernel = state.range(1) != 0;
-  if (kernel && !RulebookKernelAvailable(c.linear->weight.size(0))) {
+  if (kernel && !RulebookKernelSupported()) {
     state.SkipWithError("no AVX2 and FMA on this CPU");
     return;
   }
-  SetRulebookKernelEnabled(kernel);
+  SetRulebookKernelUse(kernel ? RulebookKernelUse::kOn : RulebookKernelUse::kOff);
   torch::NoGradGuard no_grad;
   for (auto _ : state) {
     torch::Tensor out =
@@ -94,7 +94,7 @@ void BM_TreeConvRulebook(benchmark::State& state) {
                              c.weight_by_offset.Of(c.linear->weight));
     benchmark::DoNotOptimize(out.data_ptr<float>());
   }
-  SetRulebookKernelEnabled(true);
+  SetRulebookKernelUse(RulebookKernelUse::kAuto);
   Counters(state, c);
 }
 BENCHMARK(BM_TreeConvRulebook)

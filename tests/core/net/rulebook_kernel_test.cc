@@ -8,6 +8,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "core/net/inference_kernels.h"
@@ -16,11 +17,11 @@
 namespace rpsr::core::net {
 namespace {
 
-// Turns the kernel off for a scope (the BLAS path), on again after.
-class KernelOff {
+// Sets where the kernel runs for a scope, back to the default (kAuto) after.
+class KernelUse {
  public:
-  KernelOff() { SetRulebookKernelEnabled(false); }
-  ~KernelOff() { SetRulebookKernelEnabled(true); }
+  explicit KernelUse(RulebookKernelUse use) { SetRulebookKernelUse(use); }
+  ~KernelUse() { SetRulebookKernelUse(RulebookKernelUse::kAuto); }
 };
 
 // Neighbour indices into `rows` rows, about a third empty (== rows), the centre (slot 13) each
@@ -33,8 +34,30 @@ torch::Tensor SameDepthNeighbours(int64_t rows, uint64_t seed) {
   return idx;
 }
 
+TEST(RulebookKernelTest, StepsAsideForOpenBlasSmallMatrixKernelsByDefault) {
+  EXPECT_TRUE(AutoChoosesRulebookKernel(true, "Zen"));
+  EXPECT_TRUE(AutoChoosesRulebookKernel(true, "Haswell"));  // also OPENBLAS_CORETYPE=Haswell
+  EXPECT_TRUE(AutoChoosesRulebookKernel(true, nullptr));    // another BLAS
+  EXPECT_FALSE(AutoChoosesRulebookKernel(true, "SkylakeX"));
+  EXPECT_FALSE(AutoChoosesRulebookKernel(true, "Cooperlake"));
+  EXPECT_FALSE(AutoChoosesRulebookKernel(true, "SapphireRapids"));
+  EXPECT_FALSE(AutoChoosesRulebookKernel(false, "Zen"));
+  EXPECT_FALSE(AutoChoosesRulebookKernel(false, nullptr));
+  // The default says what it chose; kOff and kOn override it.
+  EXPECT_EQ(RulebookKernelAvailable(32),
+            std::string(RulebookKernelDescription()) == "rpsr AVX2 kernel");
+  {
+    const KernelUse off(RulebookKernelUse::kOff);
+    EXPECT_FALSE(RulebookKernelAvailable(32));
+  }
+  const KernelUse on(RulebookKernelUse::kOn);
+  EXPECT_EQ(RulebookKernelAvailable(32), RulebookKernelSupported());
+}
+
 TEST(RulebookKernelTest, AddsWhatADoubleLoopAddsForEveryTailOfItsRowGroups) {
-  if (!RulebookKernelAvailable(32)) GTEST_SKIP() << "no AVX2 and FMA on this CPU";
+  if (!RulebookKernelSupported()) GTEST_SKIP() << "no AVX2 and FMA on this CPU";
+  const KernelUse on(RulebookKernelUse::kOn);  // on AVX-512 hosts too, where kAuto leaves it out
+  EXPECT_TRUE(RulebookKernelAvailable(32));
   EXPECT_FALSE(RulebookKernelAvailable(40)) << "widths that are not multiples of 16 use BLAS";
   EXPECT_FALSE(RulebookKernelAvailable(0));
   constexpr int64_t kChannels = 7, kWidth = 32, kInRows = 20, kOutRows = 16;
@@ -75,8 +98,9 @@ TEST(RulebookKernelTest, AddsWhatADoubleLoopAddsForEveryTailOfItsRowGroups) {
 }
 
 TEST(RulebookKernelTest, TreeConvolutionEqualsTheBlasPath) {
-  if (!RulebookKernelAvailable(32)) GTEST_SKIP() << "no AVX2 and FMA on this CPU";
+  if (!RulebookKernelSupported()) GTEST_SKIP() << "no AVX2 and FMA on this CPU";
   if (!SparseTreeConvAvailable()) GTEST_SKIP() << "the loaded BLAS exports no sgemm_";
+  const KernelUse on(RulebookKernelUse::kOn);
   torch::NoGradGuard no_grad;
   // The shipped models' convolutions: 6 and 1 channels to 32 (depth 5), 32 to 64, 64 to 128.
   for (const auto& [channels, width] :
@@ -90,10 +114,11 @@ TEST(RulebookKernelTest, TreeConvolutionEqualsTheBlasPath) {
                                                       linear->bias, {0, 301}, by_offset);
     torch::Tensor blas;
     {
-      KernelOff off;
+      const KernelUse off(RulebookKernelUse::kOff);
       blas = SparseTreeConvLinear(features, neighbors, linear->weight, linear->bias, {0, 301},
                                   by_offset);
     }
+    SetRulebookKernelUse(RulebookKernelUse::kOn);  // back on after the scope's kAuto
     ASSERT_EQ(kernel.sizes(), blas.sizes());
     EXPECT_TRUE(torch::allclose(kernel, blas, 1e-5, 1e-5)) << channels << " -> " << width;
     EXPECT_FALSE(torch::equal(kernel, torch::zeros_like(kernel)));
@@ -101,8 +126,9 @@ TEST(RulebookKernelTest, TreeConvolutionEqualsTheBlasPath) {
 }
 
 TEST(RulebookKernelTest, ACloudInABatchComesOutAsAlone) {
-  if (!RulebookKernelAvailable(64)) GTEST_SKIP() << "no AVX2 and FMA on this CPU";
+  if (!RulebookKernelSupported()) GTEST_SKIP() << "no AVX2 and FMA on this CPU";
   if (!SparseTreeConvAvailable()) GTEST_SKIP() << "the loaded BLAS exports no sgemm_";
+  const KernelUse on(RulebookKernelUse::kOn);
   torch::NoGradGuard no_grad;
   torch::manual_seed(17);
   torch::nn::Linear linear(27 * 32, 64);
