@@ -17,6 +17,7 @@
 #include "absl/synchronization/notification.h"
 #include "core/io/file_bytes.h"
 #include "core/net/blas_info.h"
+#include "core/net/rulebook_kernel.h"
 #include "grpcpp/ext/proto_server_reflection_plugin.h"
 #include "grpcpp/grpcpp.h"
 #include "grpcpp/health_check_service_interface.h"
@@ -303,6 +304,7 @@ class ServerState {
       LogEvent("info", "model_loaded",
                {{"model", description},
                 {"blas", core::net::BlasDescription()},
+                {"network_products", core::net::RulebookKernelDescription()},
                 {"seconds", absl::StrCat(absl::ToDoubleSeconds(absl::Now() - start))}});
     }
     return absl::OkStatus();

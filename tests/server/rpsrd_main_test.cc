@@ -120,6 +120,8 @@ TEST(RpsrdTest, ServesAndDrainsOnSigterm) {
   EXPECT_THAT(loaded, HasSubstr("RPSRNet"));
   // The BLAS kernels decide the network's speed: the log names them (DEPS.md installs OpenBLAS).
   EXPECT_THAT(loaded, HasSubstr("blas=\"OpenBLAS ")) << loaded;
+  // And which does the network's products: rpsr's AVX2 kernel or the BLAS (rulebook_kernel.h).
+  EXPECT_THAT(loaded, HasSubstr("network_products=\"")) << loaded;
 
   testing::ServiceTestClient client(absl::StrCat("127.0.0.1:", port));
   EXPECT_EQ(client.HealthStatus(""), 1);
