@@ -22,4 +22,11 @@ std::string BlasDescription() {
   return description;
 }
 
+const char* OpenBlasCoreName() {
+  using NameFunction = char* (*)();
+  const auto corename =
+      reinterpret_cast<NameFunction>(dlsym(RTLD_DEFAULT, "openblas_get_corename"));
+  return corename != nullptr ? corename() : nullptr;
+}
+
 }  // namespace rpsr::core::net

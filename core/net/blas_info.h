@@ -18,6 +18,10 @@ namespace rpsr::core::net {
 // "not OpenBLAS" when no OpenBLAS is loaded (e.g. reference BLAS, see ../shared/DEPS.md).
 std::string BlasDescription();
 
+// OpenBLAS's chosen core (openblas_get_corename: "Zen", "Haswell", "SkylakeX", ...), or null when
+// the loaded BLAS is not OpenBLAS. For choices that depend on its kernels (rulebook_kernel.h).
+const char* OpenBlasCoreName();
+
 }  // namespace rpsr::core::net
 
 #endif  // RPSR_CORE_NET_BLAS_INFO_H_

@@ -61,13 +61,12 @@ torch::Tensor MultiheadAttentionAtInference(torch::nn::MultiheadAttentionImpl& a
                                             AttentionWeightsT& weights_t) {
   const auto& o = attention.options;
   const int64_t e = o.embed_dim();
-  const bool usable =
-      !attention.is_training() && attention._qkv_same_embed_dim && !attention.bias_k.defined() &&
-      !attention.bias_v.defined() && !o.add_zero_attn() && query.dim() == 3 &&
-      key_value.dim() == 3 && query.size(2) == e && key_value.size(2) == e &&
-      query.size(1) == key_value.size(1) &&
-      DenseAtInferenceAvailable(query, attention.in_proj_weight) &&
-      DenseAtInferenceAvailable(query, attention.out_proj->weight) && RulebookKernelAvailable(e);
+  const bool usable = !attention.is_training() && attention._qkv_same_embed_dim &&
+                      !attention.bias_k.defined() && !attention.bias_v.defined() &&
+                      !o.add_zero_attn() && query.dim() == 3 && key_value.dim() == 3 &&
+                      key_value.size(2) == e && query.size(1) == key_value.size(1) &&
+                      DenseAtInferenceAvailable(query, attention.in_proj_weight) &&
+                      DenseAtInferenceAvailable(query, attention.out_proj->weight);
   if (!usable) {
     return std::get<0>(
         attention.forward(query, key_value, key_value, key_padding_mask, /*need_weights=*/false));

@@ -26,6 +26,12 @@ torch::Tensor LinearAtInference(const torch::Tensor& x, torch::nn::LinearImpl& l
 // gradient wanted (UseInferenceKernels of both) and RulebookKernelAvailable(out).
 bool DenseAtInferenceAvailable(const torch::Tensor& x, const torch::Tensor& weight);
 
+// A MultiheadAttention's weights transposed for the kernel, kept per module.
+struct AttentionWeightsT {
+  TransposedWeightCache in_proj;   // in_proj_weight.t(): [E, 3E]
+  TransposedWeightCache out_proj;  // out_proj->weight.t(): [E, E]
+};
+
 // torch::nn::MultiheadAttention's output (need_weights false, no attention mask) for sequence-
 // first query [Tq, B, E] and key = value [Tk, B, E] with key_padding_mask [B, Tk] (true: ignore;
 // or undefined), its projections through the kernel: the same operations as LibTorch's
@@ -33,10 +39,6 @@ bool DenseAtInferenceAvailable(const torch::Tensor& x, const torch::Tensor& weig
 // bmm), so the same values within float rounding. Falls back to the module's forward where the
 // kernel is not available or the module uses what this path does not (separate key/value
 // widths, bias_k/bias_v, add_zero_attn, training).
-struct AttentionWeightsT {
-  TransposedWeightCache in_proj;   // in_proj_weight.t(): [E, 3E]
-  TransposedWeightCache out_proj;  // out_proj->weight.t(): [E, E]
-};
 torch::Tensor MultiheadAttentionAtInference(torch::nn::MultiheadAttentionImpl& attention,
                                             const torch::Tensor& query,
                                             const torch::Tensor& key_value,

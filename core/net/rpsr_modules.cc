@@ -190,15 +190,13 @@ torch::nn::Sequential FeedForward(int64_t width, int64_t hidden) {
   return torch::nn::Sequential(torch::nn::Linear(width, hidden), torch::nn::ReLU(),
                                torch::nn::Linear(hidden, width));
 }
-// The feed-forward block at inference: its two Linear layers through the kernel where it runs
-// (dense_at_inference.h), the module's forward elsewhere.
+// The feed-forward block (Linear, ReLU, Linear) with each Linear through LinearAtInference: the
+// kernel where it runs (dense_at_inference.h), the layer's own forward elsewhere.
 torch::Tensor FeedForwardAt(torch::nn::Sequential& block, const torch::Tensor& x,
                             std::array<TransposedWeightCache, 2>& weights_t) {
   auto* first = block->ptr(0)->as<torch::nn::LinearImpl>();
   auto* second = block->ptr(2)->as<torch::nn::LinearImpl>();
-  if (first == nullptr || second == nullptr || !DenseAtInferenceAvailable(x, first->weight)) {
-    return block->forward(x);
-  }
+  if (first == nullptr || second == nullptr) return block->forward(x);
   return LinearAtInference(torch::relu(LinearAtInference(x, *first, weights_t[0])), *second,
                            weights_t[1]);
 }

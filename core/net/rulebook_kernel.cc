@@ -1,10 +1,11 @@
 #include "core/net/rulebook_kernel.h"
 
-#include <dlfcn.h>
 #include <immintrin.h>
 #include <strings.h>
 
 #include <atomic>
+
+#include "core/net/blas_info.h"
 
 namespace rpsr::core::net {
 
@@ -17,19 +18,27 @@ bool CpuHasAvx2Fma() {
   return has;
 }
 
-// OpenBLAS's chosen core, looked up at run time as blas_info.cc does (LibTorch links the BLAS);
-// null when the BLAS is not OpenBLAS.
-const char* OpenBlasCore() {
-  using NameFunction = char* (*)();
-  const auto corename =
-      reinterpret_cast<NameFunction>(dlsym(RTLD_DEFAULT, "openblas_get_corename"));
-  return corename != nullptr ? corename() : nullptr;
+bool KernelChosen() {
+  switch (kernel_use.load(std::memory_order_relaxed)) {
+    case RulebookKernelUse::kOn:
+      return CpuHasAvx2Fma();
+    case RulebookKernelUse::kOff:
+      return false;
+    case RulebookKernelUse::kAuto:
+      break;
+  }
+  static const bool chosen = AutoChoosesRulebookKernel(CpuHasAvx2Fma(), OpenBlasCoreName());
+  return chosen;
 }
 
-// Only the functions below are compiled for AVX2 and FMA; the project's baseline stays x86-64,
-// and they run only where CpuHasAvx2Fma() said so.
+}  // namespace
+
+// Only the functions below, up to pop_options, are compiled for AVX2 and FMA; the project's
+// baseline stays x86-64, and they run only where CpuHasAvx2Fma() said so.
 #pragma GCC push_options
 #pragma GCC target("avx2,fma")
+
+namespace {
 
 // kRows output rows (distinct) += their input rows times `block` (rows `ldb` floats apart), 16
 // columns at a time: 2 x kRows accumulators, the block's two column vectors and one broadcast
@@ -73,39 +82,33 @@ void AddProducts(int64_t n, int64_t channels, const float* block, int64_t ldb, i
     for (int r = 0; r < kGroup; ++r) rows(p + r, a[r], o[r]);
     AddRowsTimesBlock<kGroup>(a, o, channels, block, ldb, width);
   }
+  // The last 1-5 pairs by the kernel of their count.
+  using Tail =
+      void (*)(const float* const*, float* const*, int64_t, const float*, int64_t, int64_t);
+  static constexpr Tail kTail[kGroup] = {nullptr,
+                                         &AddRowsTimesBlock<1>,
+                                         &AddRowsTimesBlock<2>,
+                                         &AddRowsTimesBlock<3>,
+                                         &AddRowsTimesBlock<4>,
+                                         &AddRowsTimesBlock<5>};
   const int left = static_cast<int>(n - p);
+  if (left == 0) return;
   for (int r = 0; r < left; ++r) rows(p + r, a[r], o[r]);
-  switch (left) {
-    case 5:
-      AddRowsTimesBlock<5>(a, o, channels, block, ldb, width);
-      break;
-    case 4:
-      AddRowsTimesBlock<4>(a, o, channels, block, ldb, width);
-      break;
-    case 3:
-      AddRowsTimesBlock<3>(a, o, channels, block, ldb, width);
-      break;
-    case 2:
-      AddRowsTimesBlock<2>(a, o, channels, block, ldb, width);
-      break;
-    case 1:
-      AddRowsTimesBlock<1>(a, o, channels, block, ldb, width);
-      break;
-    default:
-      break;
-  }
+  kTail[left](a, o, channels, block, ldb, width);
 }
 
-void AddPairProducts(const float* in, int64_t channels, const int32_t* in_rows,
-                     const int32_t* out_rows, int64_t n, const float* block, int64_t width,
-                     float* out) {
+}  // namespace
+
+void RulebookAddProducts(const float* in, int64_t channels, const int32_t* in_rows,
+                         const int32_t* out_rows, int64_t n, const float* block, int64_t width,
+                         float* out) {
   AddProducts(n, channels, block, width, width, [&](int64_t p, const float*& a, float*& o) {
     a = in + static_cast<int64_t>(in_rows[p]) * channels;
     o = out + static_cast<int64_t>(out_rows[p]) * width;
   });
 }
 
-void AddDenseProducts(const float* in, int64_t channels, int64_t n, const float* block, int64_t ldb,
+void DenseAddProducts(const float* in, int64_t channels, int64_t n, const float* block, int64_t ldb,
                       int64_t width, float* out) {
   AddProducts(n, channels, block, ldb, width, [&](int64_t p, const float*& a, float*& o) {
     a = in + p * channels;
@@ -114,8 +117,6 @@ void AddDenseProducts(const float* in, int64_t channels, int64_t n, const float*
 }
 
 #pragma GCC pop_options
-
-}  // namespace
 
 bool RulebookKernelSupported() { return CpuHasAvx2Fma(); }
 
@@ -132,21 +133,6 @@ void SetRulebookKernelUse(RulebookKernelUse use) {
   kernel_use.store(use, std::memory_order_relaxed);
 }
 
-namespace {
-bool KernelChosen() {
-  switch (kernel_use.load(std::memory_order_relaxed)) {
-    case RulebookKernelUse::kOn:
-      return CpuHasAvx2Fma();
-    case RulebookKernelUse::kOff:
-      return false;
-    case RulebookKernelUse::kAuto:
-      break;
-  }
-  static const bool chosen = AutoChoosesRulebookKernel(CpuHasAvx2Fma(), OpenBlasCore());
-  return chosen;
-}
-}  // namespace
-
 bool RulebookKernelAvailable(int64_t width) {
   return width > 0 && width % 16 == 0 && KernelChosen();
 }
@@ -158,17 +144,6 @@ const char* RulebookKernelDescription() {
     return "BLAS (rpsr's kernel turned off)";
   }
   return "BLAS (OpenBLAS's AVX-512 small-matrix kernels)";
-}
-
-void RulebookAddProducts(const float* in, int64_t channels, const int32_t* in_rows,
-                         const int32_t* out_rows, int64_t n, const float* block, int64_t width,
-                         float* out) {
-  AddPairProducts(in, channels, in_rows, out_rows, n, block, width, out);
-}
-
-void DenseAddProducts(const float* in, int64_t channels, int64_t n, const float* block, int64_t ldb,
-                      int64_t width, float* out) {
-  AddDenseProducts(in, channels, n, block, ldb, width, out);
 }
 
 }  // namespace rpsr::core::net

@@ -8,6 +8,7 @@
 
 #include "core/net/rulebook_kernel.h"
 #include "gtest/gtest.h"
+#include "tests/core/net/rulebook_kernel_use.h"
 
 namespace rpsr::core::net {
 namespace {
@@ -51,7 +52,7 @@ AttentionCase MakeCase(int64_t tq, int64_t tk, int64_t e, uint64_t seed) {
 
 TEST(DenseAtInferenceTest, AttentionEqualsTheModule) {
   if (!RulebookKernelSupported()) GTEST_SKIP() << "no AVX2 and FMA on this CPU";
-  SetRulebookKernelUse(RulebookKernelUse::kOn);  // on AVX-512 hosts too
+  const testing::ScopedRulebookKernelUse on(RulebookKernelUse::kOn);  // AVX-512 hosts too
   torch::NoGradGuard no_grad;
   // The shipped models' widths (128 and 64, 4 heads) and the tests' (32).
   for (const int64_t e : {128, 64, 32}) {
@@ -77,7 +78,6 @@ TEST(DenseAtInferenceTest, AttentionEqualsTheModule) {
       }
     }
   }
-  SetRulebookKernelUse(RulebookKernelUse::kAuto);
 }
 
 TEST(DenseAtInferenceTest, WithoutTheKernelOrWithAGradientItIsTheModule) {
@@ -93,10 +93,9 @@ TEST(DenseAtInferenceTest, WithoutTheKernelOrWithAGradientItIsTheModule) {
   torch::NoGradGuard no_grad;
   EXPECT_TRUE(torch::equal(with_grad, std::get<0>(attention->forward(c.query, c.key_value,
                                                                      c.key_value, c.mask, false))));
-  SetRulebookKernelUse(RulebookKernelUse::kOff);
+  const testing::ScopedRulebookKernelUse kernel_off(RulebookKernelUse::kOff);
   const torch::Tensor off =
       MultiheadAttentionAtInference(*attention, c.query, c.key_value, c.mask, weights_t);
-  SetRulebookKernelUse(RulebookKernelUse::kAuto);
   EXPECT_TRUE(torch::equal(off, with_grad));
 }
 

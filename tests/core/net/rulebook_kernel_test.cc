@@ -13,16 +13,12 @@
 
 #include "core/net/inference_kernels.h"
 #include "gtest/gtest.h"
+#include "tests/core/net/rulebook_kernel_use.h"
 
 namespace rpsr::core::net {
 namespace {
 
-// Sets where the kernel runs for a scope, back to the default (kAuto) after.
-class KernelUse {
- public:
-  explicit KernelUse(RulebookKernelUse use) { SetRulebookKernelUse(use); }
-  ~KernelUse() { SetRulebookKernelUse(RulebookKernelUse::kAuto); }
-};
+using KernelUse = testing::ScopedRulebookKernelUse;
 
 // Neighbour indices into `rows` rows, about a third empty (== rows), the centre (slot 13) each
 // node itself, as a same-depth tree convolution has it.
@@ -100,7 +96,6 @@ TEST(RulebookKernelTest, AddsWhatADoubleLoopAddsForEveryTailOfItsRowGroups) {
 TEST(RulebookKernelTest, TreeConvolutionEqualsTheBlasPath) {
   if (!RulebookKernelSupported()) GTEST_SKIP() << "no AVX2 and FMA on this CPU";
   if (!SparseTreeConvAvailable()) GTEST_SKIP() << "the loaded BLAS exports no sgemm_";
-  const KernelUse on(RulebookKernelUse::kOn);
   torch::NoGradGuard no_grad;
   // The shipped models' convolutions: 6 and 1 channels to 32 (depth 5), 32 to 64, 64 to 128.
   for (const auto& [channels, width] :
@@ -110,15 +105,17 @@ TEST(RulebookKernelTest, TreeConvolutionEqualsTheBlasPath) {
     const torch::Tensor features = torch::randn({301, channels});
     const torch::Tensor neighbors = SameDepthNeighbours(301, 13 + channels);
     const torch::Tensor by_offset = linear->weight.t().contiguous();
-    const torch::Tensor kernel = SparseTreeConvLinear(features, neighbors, linear->weight,
-                                                      linear->bias, {0, 301}, by_offset);
-    torch::Tensor blas;
+    torch::Tensor kernel, blas;
+    {
+      const KernelUse on(RulebookKernelUse::kOn);
+      kernel = SparseTreeConvLinear(features, neighbors, linear->weight, linear->bias, {0, 301},
+                                    by_offset);
+    }
     {
       const KernelUse off(RulebookKernelUse::kOff);
       blas = SparseTreeConvLinear(features, neighbors, linear->weight, linear->bias, {0, 301},
                                   by_offset);
     }
-    SetRulebookKernelUse(RulebookKernelUse::kOn);  // back on after the scope's kAuto
     ASSERT_EQ(kernel.sizes(), blas.sizes());
     EXPECT_TRUE(torch::allclose(kernel, blas, 1e-5, 1e-5)) << channels << " -> " << width;
     EXPECT_FALSE(torch::equal(kernel, torch::zeros_like(kernel)));
