@@ -125,6 +125,7 @@ void ToProto(const RegisterOptions& in, rpsr::v1::RegisterOptions* out) {
   out->set_deadline_seconds(absl::ToDoubleSeconds(in.server_deadline));
   out->set_refine_from_initial(in.refine_from_initial);
   out->set_search_scene_start(in.search_scene_start);
+  out->set_symmetric_starts(in.symmetric_starts);
   out->set_rebin_coarse_depths(in.rebin_coarse_depths);
   out->set_joint_finest_stage(in.joint_finest_stage);
   out->set_coarse_wide_search(in.coarse_wide_search);

@@ -146,6 +146,9 @@ struct RegisterOptions {
   // the network's start is not confident; search a start about z on scene-scale trees.
   bool refine_from_initial = true;
   bool search_scene_start = true;
+  // Experimental: refine the answer turned by the target's near-symmetry too (proto
+  // RegisterOptions.symmetric_starts).
+  bool symmetric_starts = false;
   // The refinement's coarse depths on the target's cells (proto RegisterOptions; false: the
   // source tree's own cells).
   bool rebin_coarse_depths = true;

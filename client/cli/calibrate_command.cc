@@ -138,7 +138,7 @@ int RunCalibrateCommand(const std::vector<std::string>& /*args*/) {
   // A flag that would change either is refused rather than silently ignored: a confidence
   // measured on other settings than the user meant would mislead.
   const std::vector<std::string> refused =
-      GivenAmong({"mode", "passes", "refine_from_initial", "search_scene_start",
+      GivenAmong({"mode", "passes", "refine_from_initial", "search_scene_start", "symmetric_starts",
                   "rebin_coarse_depths", "joint_finest_stage", "noise_polish", "coarse_wide_search",
                   "line_normals_from_planes", "hold_degenerate_at_initial", "tree_depth",
                   "protocol", "seed", "num_points", "count", "split", "disturbance", "level"});

@@ -53,6 +53,10 @@ ABSL_FLAG(
     "eval, register, odometry, bench, net+refine on scene-scale trees: when the answer is still "
     "below 0.9 confidence, search a start (turns about z, assumed up; shifts of whole "
     "cells) and refine from it too");
+ABSL_FLAG(bool, symmetric_starts, false,
+          "eval, register, odometry, bench, net+refine on object-scale trees (experimental): "
+          "when the target has near-symmetries (a gear's teeth), also refine the answer turned "
+          "by the one that leaves the fewest nodes without a partner");
 ABSL_FLAG(
     bool, rebin_coarse_depths, true,
     "eval, register, odometry, bench (refining modes): the refinement's coarse depths compare the "
@@ -99,6 +103,7 @@ void ApplyRegistrationFlags(core::RegistrationOptions& options) {
   options.passes = absl::GetFlag(FLAGS_passes);
   options.also_refine_from_initial = absl::GetFlag(FLAGS_refine_from_initial);
   options.search_scene_start = absl::GetFlag(FLAGS_search_scene_start);
+  options.try_symmetric_starts = absl::GetFlag(FLAGS_symmetric_starts);
   options.refinement.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
   options.refinement.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);
   options.refinement.noise_polish = absl::GetFlag(FLAGS_noise_polish);

@@ -11,14 +11,19 @@
 
 namespace rpsr::core {
 
-double MeanNodeDistanceCells(const Octree& source, const Octree& target,
-                             const Eigen::Isometry3d& T_target_source, int depth,
-                             const NodeClosenessOptions& options) {
-  if (depth < 1 || depth > source.max_depth() || depth > target.max_depth()) return -1.0;
+namespace {
+
+// Calls visit(distance, capped at kCapCells cells) for each sampled source node and returns the
+// cell edge; 0 when nothing can be measured (MeanNodeDistanceCells' negative cases).
+template <typename Visit>
+double VisitNodeDistances(const Octree& source, const Octree& target,
+                          const Eigen::Isometry3d& T_target_source, int depth,
+                          const NodeClosenessOptions& options, Visit visit) {
+  if (depth < 1 || depth > source.max_depth() || depth > target.max_depth()) return 0.0;
   const Octree::Level& s = source.level(depth);
   const Octree::Level& t = target.level(depth);
   const Octree::Level& coarse = target.level(depth - 1);
-  if (s.size() == 0 || t.size() == 0 || options.max_source_nodes == 0) return -1.0;
+  if (s.size() == 0 || t.size() == 0 || options.max_source_nodes == 0) return 0.0;
   const int64_t cells = int64_t{1} << (depth - 1);
   const double coarse_edge = CellEdge(target, depth - 1);
   const double edge = 0.5 * coarse_edge;
@@ -48,12 +53,11 @@ double MeanNodeDistanceCells(const Octree& source, const Octree& target,
   };
   const size_t n = s.size();
   const size_t used = std::min(n, options.max_source_nodes);
-  double sum = 0.0;
   for (size_t k = 0; k < used; ++k) {
     const size_t node = k * n / used;  // even stride over the Morton order
     const Eigen::Vector3d q = T_target_source * s.center_of_mass[node].cast<double>();
     if (!q.allFinite()) {  // a non-finite pose: no partner (and no undefined integer cast)
-      sum += cap;
+      visit(cap);
       continue;
     }
     std::array<int64_t, 3> home;
@@ -84,9 +88,41 @@ double MeanNodeDistanceCells(const Octree& source, const Octree& target,
         }
       }
     }
-    sum += std::sqrt(best2);
+    visit(std::sqrt(best2));
   }
-  return sum / static_cast<double>(used) / edge;
+  return edge;
+}
+
+}  // namespace
+
+double MeanNodeDistanceCells(const Octree& source, const Octree& target,
+                             const Eigen::Isometry3d& T_target_source, int depth,
+                             const NodeClosenessOptions& options) {
+  double sum = 0.0;
+  size_t nodes = 0;
+  const double edge =
+      VisitNodeDistances(source, target, T_target_source, depth, options, [&](double distance) {
+        sum += distance;
+        ++nodes;
+      });
+  if (!(edge > 0.0)) return -1.0;
+  return sum / static_cast<double>(nodes) / edge;
+}
+
+double FarNodeFraction(const Octree& source, const Octree& target,
+                       const Eigen::Isometry3d& T_target_source, int depth, double far_cells,
+                       const NodeClosenessOptions& options) {
+  if (depth < 1 || depth > target.max_depth()) return -1.0;
+  const double far_distance = far_cells * CellEdge(target, depth);
+  size_t far = 0;
+  size_t nodes = 0;
+  const double edge =
+      VisitNodeDistances(source, target, T_target_source, depth, options, [&](double distance) {
+        far += distance > far_distance;
+        ++nodes;
+      });
+  if (!(edge > 0.0)) return -1.0;
+  return static_cast<double>(far) / static_cast<double>(nodes);
 }
 
 }  // namespace rpsr::core

@@ -19,6 +19,7 @@
 #include "core/refine/correlative_start.h"
 #include "core/refine/degenerate_hold.h"
 #include "core/refine/node_closeness.h"
+#include "core/refine/symmetry_starts.h"
 #include "core/registrar/confidence_model.h"
 #include "core/registrar/embedded_models.h"
 
@@ -393,6 +394,30 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
     absl::StatusOr<CorrelativeStart> searched = FindCorrelativeStart(source, target, initial);
     if (searched.ok() && (searched->score > searched->initial_score || !refined_from_initial)) {
       try_start(searched->T_target_source, "searched");
+    }
+  }
+  // The symmetric start (RegistrationOptions::try_symmetric_starts): object-scale trees whose
+  // target has near-symmetries, whatever the confidence (a tooth off reads confident). The twin
+  // is kept when, refined, it still leaves clearly fewer source nodes without a partner and does
+  // not fit clearly worse; the other starts' rule would not take it (the twins fit alike).
+  if (net_refine && options.try_symmetric_starts && best.valid &&
+      !IsDeepPair(source, target, refinement)) {
+    const SelfSymmetryOptions symmetry_options;
+    const std::vector<SelfSymmetry> symmetries = FindSelfSymmetries(target, symmetry_options);
+    if (std::optional<SymmetricTwin> twin =
+            BestSymmetricTwin(source, target, best.T_target_source, symmetries, symmetry_options)) {
+      absl::StatusOr<TreeRefinementResult> r =
+          RefineWithFallback(source, target, twin->T_target_source, refinement, cache);
+      ++result.starts;
+      if (r.ok() && r->valid && !ClearlyBetter(best, *r)) {
+        const double far = TwoWayFarFraction(source, target, r->T_target_source, symmetry_options);
+        if (far >= 0.0 &&
+            far <= twin->answer_far_fraction - symmetry_options.min_far_fraction_drop) {
+          settle(*r, twin->T_target_source, result);
+          result.start = "symmetric";
+          best = *std::move(r);
+        }
+      }
     }
   }
   if (options.hold_degenerate_at_initial && options.initial_T_target_source.has_value() &&

@@ -78,6 +78,16 @@ struct RegistrationOptions {
   // does not hold every motion of 10 m: on 64 simulated LiDAR pairs 10 frames apart recall at
   // (1 deg, 0.3 m) went 0.781 -> 0.938, on 64 pairs 5 frames apart it stayed 1.000.
   bool search_scene_start = true;
+  // net+refine on object-scale trees (experimental, off by default): when the target has
+  // near-symmetries (FindSelfSymmetries, core/refine/symmetry_starts.h: a gear's teeth), the
+  // answer turned by the one that leaves the fewest nodes without a partner is refined too, and
+  // kept when it still leaves clearly fewer (TwoWayFarFraction) and fits no worse by fitness. A
+  // refinement that ends a tooth off fits all but the feature that breaks the symmetry (a gear's
+  // pin), often confidently, and no local step crosses a tooth. Off because, while it fixes gears
+  // a tooth off (unseen objects, ten settings, seed 2 mean recall 0.771 -> 0.787, seed 3 0.789 ->
+  // 0.791), some misses it touches end farther off (a 28-degree miss at 111 degrees, at 0.83
+  // confidence): tests/bench/notes/refinement-notes.md, *Gears a tooth off*.
+  bool try_symmetric_starts = false;
   // With initial_T_target_source given: when the answer's geometry is degenerate (num_degenerate
   // > 0), its motion from the initial guess is kept only off the degenerate directions; along
   // them the pose is the guess's (HoldDegenerateDirections, core/refine/degenerate_hold.h), and

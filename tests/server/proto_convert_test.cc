@@ -164,6 +164,18 @@ TEST(ProtoConvertTest, LaterStartsAreOnUnlessTurnedOff) {
   EXPECT_TRUE(options->search_scene_start);
 }
 
+// The symmetric start is experimental: off unless a client turns it on.
+TEST(ProtoConvertTest, SymmetricStartsAreOffUnlessTurnedOn) {
+  auto options = OptionsFromProto({});
+  ASSERT_TRUE(options.ok());
+  EXPECT_FALSE(options->try_symmetric_starts);
+  v1::RegisterOptions proto;
+  proto.set_symmetric_starts(true);
+  options = OptionsFromProto(proto);
+  ASSERT_TRUE(options.ok());
+  EXPECT_TRUE(options->try_symmetric_starts);
+}
+
 TEST(ProtoConvertTest, ResultCarriesEverythingTheRegistrarSays) {
   core::RegistrationResult result;
   result.valid = false;

@@ -66,6 +66,24 @@ TEST(NodeClosenessTest, NodesWithoutAPartnerWithinTwoCellsCountTheCap) {
               NodeClosenessOptions::kCapCells, 1e-9);
 }
 
+TEST(NodeClosenessTest, FarNodeFractionCountsTheNodesBeyondTheThreshold) {
+  const Octree tree = RefinementTree(Lattice(), kDepth);
+  const double edge = EdgeOf(tree, kDepth);
+  EXPECT_EQ(FarNodeFraction(tree, tree, Eigen::Isometry3d::Identity(), kDepth, 1.5), 0.0);
+  // Every node 1 cell off: within 1.5 cells, beyond 0.5.
+  const Eigen::Isometry3d one_cell = Shift(Eigen::Vector3d(edge, 0, 0));
+  EXPECT_EQ(FarNodeFraction(tree, tree, one_cell, kDepth, 1.5), 0.0);
+  EXPECT_EQ(FarNodeFraction(tree, tree, one_cell, kDepth, 0.5), 1.0);
+  // The 25 nodes of the lattice's last x layer moved out of the cube, the rest onto their
+  // neighbours 0.5 away (~16 cells: beyond the cap, so far as well): all far.
+  EXPECT_EQ(FarNodeFraction(tree, tree, Shift(Eigen::Vector3d(0.25, 0, 0)), kDepth, 1.5), 1.0);
+  // Moved by a whole lattice step, 100 of the 125 land on a node again.
+  EXPECT_NEAR(FarNodeFraction(tree, tree, Shift(Eigen::Vector3d(0.5, 0, 0)), kDepth, 1.5),
+              25.0 / 125.0, 1e-9);
+  EXPECT_LT(FarNodeFraction(tree, tree, Eigen::Isometry3d::Identity(), 0, 1.5), 0.0);
+  EXPECT_LT(FarNodeFraction(tree, tree, Eigen::Isometry3d::Identity(), kDepth + 1, 1.5), 0.0);
+}
+
 TEST(NodeClosenessTest, TheSampleIsAnEvenStrideOverTheSourceNodes) {
   const Octree tree = RefinementTree(Lattice(), kDepth);
   const double edge = EdgeOf(tree, kDepth);

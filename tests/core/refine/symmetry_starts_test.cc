@@ -1,0 +1,93 @@
+// FindSelfSymmetries and BestSymmetricTwin (core/refine/symmetry_starts.h): a gear's teeth are
+// found as turns about its axis, an object without a symmetry has none, and the feature that
+// breaks a gear's symmetry (its pin) leaves more nodes without a partner a tooth off than at the
+// truth.
+#include "core/refine/symmetry_starts.h"
+
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "core/data/object_pairs.h"
+#include "core/synth/seeded_random.h"
+#include "core/synth/shape_families.h"
+#include "gtest/gtest.h"
+#include "tests/core/refine/refinement_test_util.h"
+
+namespace rpsr::core {
+namespace {
+
+using testing_util::RefinementTree;
+
+// The first `count` unseen pairs of `family` among the seeds 1, 2, ... (clean, 1,024 points).
+std::vector<ObjectPair> PairsOf(const std::string& family, int count) {
+  PairOptions options;
+  options.split = ObjectSplit::kM2Unseen;
+  std::vector<ObjectPair> pairs;
+  for (uint64_t i = 0; i < 400 && static_cast<int>(pairs.size()) < count; ++i) {
+    absl::StatusOr<ObjectPair> pair = MakeObjectPair(options, DeriveSeed(2, i));
+    EXPECT_TRUE(pair.ok()) << pair.status();
+    if (pair.ok() && ShapeFamilies()[pair->family_index].name == family) {
+      pairs.push_back(*std::move(pair));
+    }
+  }
+  EXPECT_EQ(static_cast<int>(pairs.size()), count) << family;
+  return pairs;
+}
+
+TEST(SymmetryStartsTest, AGearsTeethAreTurnsAboutItsAxis) {
+  for (const ObjectPair& pair : PairsOf("gear", 3)) {
+    const Octree target = RefinementTree(pair.target, 6);
+    const std::vector<SelfSymmetry> found = FindSelfSymmetries(target);
+    // 8 to 16 teeth: the turns by k/n of a circle, k = 1 .. n - 1, about the disc's normal (the
+    // principal axis of least variance).
+    ASSERT_GE(found.size(), 7u);
+    ASSERT_LE(found.size(), 15u);
+    const double step = found.front().angle_deg;
+    EXPECT_NEAR(step, 360.0 / static_cast<double>(found.size() + 1), 1e-9);
+    for (size_t k = 0; k < found.size(); ++k) {
+      EXPECT_EQ(found[k].axis, 0);
+      EXPECT_NEAR(found[k].angle_deg, step * static_cast<double>(k + 1), 1e-6);
+      EXPECT_LE(found[k].self_distance_cells, SelfSymmetryOptions{}.max_self_distance_cells);
+      // About the target's centre of mass: it stays in place.
+      const Eigen::Vector3d centre = target.level(0).center_of_mass[0].cast<double>();
+      EXPECT_LT((found[k].S * centre - centre).norm(), 1e-9);
+    }
+  }
+}
+
+TEST(SymmetryStartsTest, AnObjectWithoutSymmetryHasNone) {
+  for (const ObjectPair& pair : PairsOf("sofa", 3)) {
+    EXPECT_TRUE(FindSelfSymmetries(RefinementTree(pair.target, 6)).empty());
+  }
+}
+
+TEST(SymmetryStartsTest, ATinyOrEmptyTreeHasNone) {
+  PointCloud one;
+  one.points.emplace_back(0.1f, 0.2f, 0.3f);
+  EXPECT_TRUE(FindSelfSymmetries(RefinementTree(one, 1)).empty());
+  EXPECT_FALSE(BestSymmetricTwin(RefinementTree(one, 1), RefinementTree(one, 1),
+                                 Eigen::Isometry3d::Identity(), {})
+                   .has_value());
+}
+
+TEST(SymmetryStartsTest, TheTruthLeavesFewerNodesFarThanATurnByATooth) {
+  for (const ObjectPair& pair : PairsOf("gear", 3)) {
+    const Octree source = RefinementTree(pair.source, 6);
+    const Octree target = RefinementTree(pair.target, 6);
+    const std::vector<SelfSymmetry> found = FindSelfSymmetries(target);
+    ASSERT_FALSE(found.empty());
+    const double at_truth = TwoWayFarFraction(source, target, pair.T_target_source);
+    for (const SelfSymmetry& tooth : {found.front(), found.back()}) {
+      // An answer a tooth off (either way), and the twin search from it.
+      const Eigen::Isometry3d off = tooth.S * pair.T_target_source;
+      EXPECT_LT(at_truth, TwoWayFarFraction(source, target, off)) << tooth.angle_deg;
+      const std::optional<SymmetricTwin> twin = BestSymmetricTwin(source, target, off, found);
+      ASSERT_TRUE(twin.has_value()) << tooth.angle_deg;
+      EXPECT_LT(twin->far_fraction, twin->answer_far_fraction);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace rpsr::core
