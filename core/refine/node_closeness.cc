@@ -13,12 +13,30 @@ namespace rpsr::core {
 
 namespace {
 
-// Calls visit(distance, capped at kCapCells cells) for each sampled source node and returns the
-// cell edge; 0 when nothing can be measured (MeanNodeDistanceCells' negative cases).
+// The 27 cells of the search, the home cell first.
+constexpr std::array<std::array<int, 3>, 27> kHomeFirst = [] {
+  std::array<std::array<int, 3>, 27> cells{};
+  int k = 1;  // cells[0] is the home cell (0, 0, 0)
+  for (int dz = -1; dz <= 1; ++dz) {
+    for (int dy = -1; dy <= 1; ++dy) {
+      for (int dx = -1; dx <= 1; ++dx) {
+        if (dx != 0 || dy != 0 || dz != 0) cells[static_cast<size_t>(k++)] = {dx, dy, dz};
+      }
+    }
+  }
+  return cells;
+}();
+
+// Calls visit(pose index, distance capped at kCapCells cells) for each sampled source node under
+// each pose (the target's lookup built once for all) and returns the cell edge; 0 when nothing
+// can be measured (MeanNodeDistanceCells' negative cases). `stop_below` (metres, > 0): a node's
+// search ends at the first partner that near, and the distance visited is then that partner's
+// (enough to tell near from far; 0: the exact nearest distance).
 template <typename Visit>
 double VisitNodeDistances(const Octree& source, const Octree& target,
-                          const Eigen::Isometry3d& T_target_source, int depth,
-                          const NodeClosenessOptions& options, Visit visit) {
+                          const std::vector<Eigen::Isometry3d>& poses, int depth,
+                          const NodeClosenessOptions& options, Visit visit,
+                          double stop_below = 0.0) {
   if (depth < 1 || depth > source.max_depth() || depth > target.max_depth()) return 0.0;
   const Octree::Level& s = source.level(depth);
   const Octree::Level& t = target.level(depth);
@@ -31,6 +49,7 @@ double VisitNodeDistances(const Octree& source, const Octree& target,
   // - 1 around the one holding the moved node.
   const double cap = NodeClosenessOptions::kCapCells * edge;
   const double cap2 = cap * cap;
+  const double stop2 = stop_below * stop_below;
   const Eigen::Vector3d origin = target.center() - Eigen::Vector3d::Constant(target.half_length());
   // The occupied cells of depth - 1: a dense table indexed by Morton code where it is small (an
   // object's depth 5: 32^3 slots), else a binary search of the level's ascending codes (a scan's
@@ -53,42 +72,43 @@ double VisitNodeDistances(const Octree& source, const Octree& target,
   };
   const size_t n = s.size();
   const size_t used = std::min(n, options.max_source_nodes);
-  for (size_t k = 0; k < used; ++k) {
-    const size_t node = k * n / used;  // even stride over the Morton order
-    const Eigen::Vector3d q = T_target_source * s.center_of_mass[node].cast<double>();
-    if (!q.allFinite()) {  // a non-finite pose: no partner (and no undefined integer cast)
-      visit(cap);
-      continue;
-    }
-    std::array<int64_t, 3> home;
-    for (int a = 0; a < 3; ++a) {
-      // Clamped so that a node far outside the cube neither overflows nor finds a cell.
-      const double f =
-          std::clamp((q[a] - origin[a]) / coarse_edge, -2.0, static_cast<double>(cells) + 2.0);
-      home[a] = static_cast<int64_t>(std::floor(f));
-    }
-    double best2 = cap2;
-    for (int dz = -1; dz <= 1; ++dz) {
-      for (int dy = -1; dy <= 1; ++dy) {
-        for (int dx = -1; dx <= 1; ++dx) {
-          const int64_t x = home[0] + dx;
-          const int64_t y = home[1] + dy;
-          const int64_t z = home[2] + dz;
-          if (x < 0 || y < 0 || z < 0 || x >= cells || y >= cells || z >= cells) continue;
-          const uint64_t code = EncodeMorton<3>(
-              {static_cast<uint32_t>(x), static_cast<uint32_t>(y), static_cast<uint32_t>(z)});
-          const int32_t found = find_coarse(code);
-          if (found == Octree::kEmpty) continue;
-          const size_t parent = static_cast<size_t>(found);
-          for (int octant = 0; octant < Octree::kChildren; ++octant) {
-            const int32_t j = t.labels[parent * Octree::kChildren + static_cast<size_t>(octant)];
-            if (j == Octree::kEmpty) continue;
-            best2 = std::min(best2, (t.center_of_mass[j].cast<double>() - q).squaredNorm());
-          }
-        }
+  for (size_t pose = 0; pose < poses.size(); ++pose) {
+    const Eigen::Isometry3d& T_target_source = poses[pose];
+    for (size_t k = 0; k < used; ++k) {
+      const size_t node = k * n / used;  // even stride over the Morton order
+      const Eigen::Vector3d q = T_target_source * s.center_of_mass[node].cast<double>();
+      if (!q.allFinite()) {  // a non-finite pose: no partner (and no undefined integer cast)
+        visit(pose, cap);
+        continue;
       }
+      std::array<int64_t, 3> home;
+      for (int a = 0; a < 3; ++a) {
+        // Clamped so that a node far outside the cube neither overflows nor finds a cell.
+        const double f =
+            std::clamp((q[a] - origin[a]) / coarse_edge, -2.0, static_cast<double>(cells) + 2.0);
+        home[a] = static_cast<int64_t>(std::floor(f));
+      }
+      double best2 = cap2;
+      // The home cell first: with stop_below set, most nodes find a partner that near there.
+      for (const std::array<int, 3>& d : kHomeFirst) {
+        const int64_t x = home[0] + d[0];
+        const int64_t y = home[1] + d[1];
+        const int64_t z = home[2] + d[2];
+        if (x < 0 || y < 0 || z < 0 || x >= cells || y >= cells || z >= cells) continue;
+        const uint64_t code = EncodeMorton<3>(
+            {static_cast<uint32_t>(x), static_cast<uint32_t>(y), static_cast<uint32_t>(z)});
+        const int32_t found = find_coarse(code);
+        if (found == Octree::kEmpty) continue;
+        const size_t parent = static_cast<size_t>(found);
+        for (int octant = 0; octant < Octree::kChildren; ++octant) {
+          const int32_t j = t.labels[parent * Octree::kChildren + static_cast<size_t>(octant)];
+          if (j == Octree::kEmpty) continue;
+          best2 = std::min(best2, (t.center_of_mass[j].cast<double>() - q).squaredNorm());
+        }
+        if (best2 <= stop2) break;
+      }
+      visit(pose, std::sqrt(best2));
     }
-    visit(std::sqrt(best2));
   }
   return edge;
 }
@@ -100,29 +120,41 @@ double MeanNodeDistanceCells(const Octree& source, const Octree& target,
                              const NodeClosenessOptions& options) {
   double sum = 0.0;
   size_t nodes = 0;
-  const double edge =
-      VisitNodeDistances(source, target, T_target_source, depth, options, [&](double distance) {
-        sum += distance;
-        ++nodes;
-      });
+  const double edge = VisitNodeDistances(source, target, {T_target_source}, depth, options,
+                                         [&](size_t, double distance) {
+                                           sum += distance;
+                                           ++nodes;
+                                         });
   if (!(edge > 0.0)) return -1.0;
   return sum / static_cast<double>(nodes) / edge;
+}
+
+std::vector<double> FarNodeFractions(const Octree& source, const Octree& target,
+                                     const std::vector<Eigen::Isometry3d>& poses, int depth,
+                                     double far_cells, const NodeClosenessOptions& options) {
+  std::vector<double> fractions(poses.size(), -1.0);
+  if (depth < 1 || depth > target.max_depth()) return fractions;
+  const double far_distance = far_cells * CellEdge(target, depth);
+  std::vector<size_t> far(poses.size(), 0);
+  std::vector<size_t> nodes(poses.size(), 0);
+  const double edge = VisitNodeDistances(
+      source, target, poses, depth, options,
+      [&](size_t pose, double distance) {
+        far[pose] += distance > far_distance;
+        ++nodes[pose];
+      },
+      far_distance);
+  if (!(edge > 0.0)) return fractions;
+  for (size_t pose = 0; pose < poses.size(); ++pose) {
+    fractions[pose] = static_cast<double>(far[pose]) / static_cast<double>(nodes[pose]);
+  }
+  return fractions;
 }
 
 double FarNodeFraction(const Octree& source, const Octree& target,
                        const Eigen::Isometry3d& T_target_source, int depth, double far_cells,
                        const NodeClosenessOptions& options) {
-  if (depth < 1 || depth > target.max_depth()) return -1.0;
-  const double far_distance = far_cells * CellEdge(target, depth);
-  size_t far = 0;
-  size_t nodes = 0;
-  const double edge =
-      VisitNodeDistances(source, target, T_target_source, depth, options, [&](double distance) {
-        far += distance > far_distance;
-        ++nodes;
-      });
-  if (!(edge > 0.0)) return -1.0;
-  return static_cast<double>(far) / static_cast<double>(nodes);
+  return FarNodeFractions(source, target, {T_target_source}, depth, far_cells, options).front();
 }
 
 }  // namespace rpsr::core

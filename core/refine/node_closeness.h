@@ -16,6 +16,7 @@
 #define RPSR_CORE_REFINE_NODE_CLOSENESS_H_
 
 #include <cstddef>
+#include <vector>
 
 #include "Eigen/Geometry"
 #include "core/tree/bh_tree.h"
@@ -49,6 +50,10 @@ double MeanNodeDistanceCells(const Octree& source, const Octree& target,
 double FarNodeFraction(const Octree& source, const Octree& target,
                        const Eigen::Isometry3d& T_target_source, int depth, double far_cells,
                        const NodeClosenessOptions& options = {});
+// The same for several poses (the target's lookup built once): one fraction per pose.
+std::vector<double> FarNodeFractions(const Octree& source, const Octree& target,
+                                     const std::vector<Eigen::Isometry3d>& poses, int depth,
+                                     double far_cells, const NodeClosenessOptions& options = {});
 
 }  // namespace rpsr::core
 

@@ -26,23 +26,30 @@ int StrongestFold(const Octree& tree, const Eigen::Vector3d& centre, const Eigen
   const Octree::Level& level = tree.level(tree.max_depth());
   const Eigen::Vector3d e1 = axis.unitOrthogonal();
   const Eigen::Vector3d e2 = axis.cross(e1);
-  std::vector<double> angle(level.size());
+  // Each node's unit direction about the axis as a complex number z, weighted by its distance;
+  // the n-th harmonic sums w z^n (powers by repeated products: no trigonometry per n).
+  std::vector<std::complex<double>> z(level.size());
   std::vector<double> weight(level.size());
   double total = 0.0;
   for (size_t i = 0; i < level.size(); ++i) {
     const Eigen::Vector3d p = level.center_of_mass[i].cast<double>() - centre;
     const double x = p.dot(e1);
     const double y = p.dot(e2);
-    angle[i] = std::atan2(y, x);
     weight[i] = std::hypot(x, y);
+    z[i] = weight[i] > 0.0 ? std::complex<double>(x, y) / weight[i] : 0.0;
     total += weight[i];
   }
   if (!(total > 0.0)) return 0;
+  std::vector<std::complex<double>> power(z.size());
+  for (size_t i = 0; i < z.size(); ++i) power[i] = z[i] * z[i];  // z^2
   int best = 0;
   double best_amplitude = 0.0;
   for (int n = 3; n <= max_folds; ++n) {
     std::complex<double> sum = 0.0;
-    for (size_t i = 0; i < level.size(); ++i) sum += weight[i] * std::polar(1.0, n * angle[i]);
+    for (size_t i = 0; i < z.size(); ++i) {
+      power[i] *= z[i];
+      sum += weight[i] * power[i];
+    }
     const double amplitude = std::abs(sum) / total;
     if (amplitude > best_amplitude) {
       best_amplitude = amplitude;
@@ -67,12 +74,9 @@ std::vector<SelfSymmetry> FindSelfSymmetries(const Octree& target,
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(
       target.Covariance(0, 0).cast<double>());
   const Eigen::Vector3d variances = solver.eigenvalues();  // ascending
-  auto try_turn = [&](int axis, double angle_rad) {
-    const Eigen::Isometry3d S = TurnAbout(centre, solver.eigenvectors().col(axis), angle_rad);
-    const double distance = MeanNodeDistanceCells(target, target, S, depth);
-    if (distance < 0.0 || distance > options.max_self_distance_cells) return false;
-    found.push_back({S, axis, angle_rad * 180.0 / M_PI, distance});
-    return true;
+  auto self_distance = [&](int axis, double angle_rad) {
+    return MeanNodeDistanceCells(
+        target, target, TurnAbout(centre, solver.eigenvectors().col(axis), angle_rad), depth);
   };
   for (int axis = 0; axis < 3; ++axis) {
     const double a = variances[(axis + 1) % 3];
@@ -82,26 +86,80 @@ std::vector<SelfSymmetry> FindSelfSymmetries(const Octree& target,
     const int folds =
         round ? StrongestFold(target, centre, solver.eigenvectors().col(axis), options.max_folds)
               : 0;
-    // One turn checked stands for its multiples (the fold's group); the half turn is checked on
-    // its own where the fold has none.
-    if (folds > 0 && try_turn(axis, 2.0 * M_PI / folds)) {
-      for (int k = 2; k < folds; ++k) {
-        const double angle = 2.0 * M_PI * k / folds;
-        found.push_back({TurnAbout(centre, solver.eigenvectors().col(axis), angle), axis,
-                         angle * 180.0 / M_PI, found.back().self_distance_cells});
-      }
+    if (folds == 0) continue;
+    // The turn by 1/n must bring the target near itself, and half of it must not: a smooth round
+    // object turned by a small angle also lies near itself, but nearer still at half the angle.
+    // One turn checked stands for its multiples (the fold's group).
+    const double tooth = self_distance(axis, 2.0 * M_PI / folds);
+    if (tooth < 0.0 || tooth > options.max_self_distance_cells) continue;
+    if (self_distance(axis, M_PI / folds) < tooth + options.min_dip_cells) continue;
+    for (int k = 1; k < folds; ++k) {
+      const double angle = 2.0 * M_PI * k / folds;
+      found.push_back({TurnAbout(centre, solver.eigenvectors().col(axis), angle), axis,
+                       angle * 180.0 / M_PI, tooth});
     }
   }
   return found;
 }
 
+namespace {
+
+// TwoWayFarFraction for several poses (each side's lookup built once).
+std::vector<double> TwoWayFarFractions(const Octree& source, const Octree& target,
+                                       const std::vector<Eigen::Isometry3d>& poses,
+                                       double far_cells) {
+  const int depth = SymmetryDepth(source, target);
+  std::vector<Eigen::Isometry3d> inverses;
+  inverses.reserve(poses.size());
+  for (const Eigen::Isometry3d& T : poses) inverses.push_back(T.inverse());
+  const std::vector<double> there = FarNodeFractions(source, target, poses, depth, far_cells);
+  const std::vector<double> back = FarNodeFractions(target, source, inverses, depth, far_cells);
+  std::vector<double> two_way(poses.size(), -1.0);
+  for (size_t k = 0; k < poses.size(); ++k) {
+    if (there[k] >= 0.0 && back[k] >= 0.0) two_way[k] = 0.5 * (there[k] + back[k]);
+  }
+  return two_way;
+}
+
+}  // namespace
+
 double TwoWayFarFraction(const Octree& source, const Octree& target, const Eigen::Isometry3d& T,
                          const SelfSymmetryOptions& options) {
-  const int depth = SymmetryDepth(source, target);
-  const double there = FarNodeFraction(source, target, T, depth, options.far_cells);
-  const double back = FarNodeFraction(target, source, T.inverse(), depth, options.far_cells);
-  if (there < 0.0 || back < 0.0) return -1.0;
-  return 0.5 * (there + back);
+  return TwoWayFarFractions(source, target, {T}, options.far_cells).front();
+}
+
+std::optional<double> SymmetricTwinMargin(const Octree& source, const Octree& target,
+                                          const Eigen::Isometry3d& answer,
+                                          const std::vector<SelfSymmetry>& symmetries,
+                                          double far_cells) {
+  if (symmetries.empty()) return std::nullopt;
+  std::vector<Eigen::Isometry3d> poses = {answer};
+  for (const SelfSymmetry& symmetry : symmetries) poses.push_back(symmetry.S * answer);
+  const std::vector<double> far = TwoWayFarFractions(source, target, poses, far_cells);
+  if (far.front() < 0.0) return std::nullopt;
+  double least = -1.0;
+  for (size_t k = 1; k < far.size(); ++k) {
+    if (far[k] >= 0.0 && (least < 0.0 || far[k] < least)) least = far[k];
+  }
+  if (least < 0.0) return std::nullopt;
+  return least - far.front();
+}
+
+bool AreSymmetricTwins(const Octree& source, const Octree& target, const Eigen::Isometry3d& a,
+                       const Eigen::Isometry3d& b, const std::vector<SelfSymmetry>& symmetries,
+                       const SelfSymmetryOptions& options) {
+  const Eigen::Vector3d centre = source.level(0).center_of_mass[0].cast<double>();
+  const double max_distance = options.twin_tolerance_rel * target.half_length();
+  const double max_angle = options.twin_tolerance_deg * M_PI / 180.0;
+  for (const SelfSymmetry& symmetry : symmetries) {
+    const Eigen::Isometry3d twin = symmetry.S * b;
+    const Eigen::AngleAxisd turn(a.linear() * twin.linear().transpose());
+    if (std::abs(turn.angle()) <= max_angle &&
+        (a * centre - twin * centre).norm() <= max_distance) {
+      return true;
+    }
+  }
+  return false;
 }
 
 std::optional<SymmetricTwin> BestSymmetricTwin(const Octree& source, const Octree& target,
@@ -109,16 +167,17 @@ std::optional<SymmetricTwin> BestSymmetricTwin(const Octree& source, const Octre
                                                const std::vector<SelfSymmetry>& symmetries,
                                                const SelfSymmetryOptions& options) {
   if (symmetries.empty()) return std::nullopt;
+  std::vector<Eigen::Isometry3d> poses = {answer};
+  for (const SelfSymmetry& symmetry : symmetries) poses.push_back(symmetry.S * answer);
+  const std::vector<double> far = TwoWayFarFractions(source, target, poses, options.far_cells);
   SymmetricTwin best;
-  best.answer_far_fraction = TwoWayFarFraction(source, target, answer, options);
+  best.answer_far_fraction = far.front();
   if (best.answer_far_fraction < 0.0) return std::nullopt;
   best.far_fraction = 2.0;
-  for (const SelfSymmetry& symmetry : symmetries) {
-    const Eigen::Isometry3d T = symmetry.S * answer;
-    const double far = TwoWayFarFraction(source, target, T, options);
-    if (far >= 0.0 && far < best.far_fraction) {
-      best.far_fraction = far;
-      best.T_target_source = T;
+  for (size_t k = 1; k < far.size(); ++k) {
+    if (far[k] >= 0.0 && far[k] < best.far_fraction) {
+      best.far_fraction = far[k];
+      best.T_target_source = poses[k];
     }
   }
   if (best.far_fraction > best.answer_far_fraction - options.min_far_fraction_drop) {

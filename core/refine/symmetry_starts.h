@@ -1,18 +1,18 @@
-// Further starts for near-symmetric objects (issue 5). A gear's teeth, a guitar's two faces:
-// rotations about one of the object's principal axes map it onto itself except for a small
-// feature (a gear's pin), and a refinement that ends a tooth off fits everything but that
-// feature. By fitness, inlier RMSE and the nodes' mean distance it fits as well as the truth
-// (unseen gears refined from the truth read no better), its confidence is high, and no local
-// step crosses a tooth. What tells the twins apart is the feature's few nodes left without any
-// partner nearby (FarNodeFraction, node_closeness.h).
+// Near-symmetric objects (issue 5). A gear's teeth: turns about the object's axis map it onto
+// itself except for a small feature (a gear's pin), and a refinement that ends a tooth off fits
+// everything but that feature. By fitness, inlier RMSE and the nodes' mean distance it fits as
+// well as the truth (unseen gears refined from the truth read no better), and no local step
+// crosses a tooth. What tells the twins apart is the feature's few nodes left without any partner
+// nearby (FarNodeFraction, node_closeness.h).
 //
-// FindSelfSymmetries finds the target's near-symmetries on its tree alone: the half turn about
-// each principal axis through the centre of mass, and, about an axis around which the spread is
-// round (its two other principal variances alike, as an n-fold symmetry needs), the turns by
-// k/n of a circle for the n whose circular harmonic of the finest nodes' angles is strongest;
-// each kept when the turned target's nodes lie as near its own as a twin's do.
-// BestSymmetricTwin then turns the answer by each and returns the turn that leaves the fewest
-// source nodes without a partner, when it leaves clearly fewer than the answer.
+// FindSelfSymmetries finds the target's near-symmetries on its tree alone: about a principal
+// axis around which the spread is round (its two other principal variances alike, as an n-fold
+// symmetry needs), the turns by k/n of a circle for the n whose circular harmonic of the finest
+// nodes' angles is strongest, kept when the turn by 1/n brings the target's nodes near its own
+// and the turn by half of it does not. SymmetricTwinMargin measures how much better an answer
+// explains the clouds than its best twin: the confidence reads it (confidence_model.h).
+// BestSymmetricTwin picks the twin to refine for the experimental symmetric start
+// (RegistrationOptions::try_symmetric_starts).
 #ifndef RPSR_CORE_REFINE_SYMMETRY_STARTS_H_
 #define RPSR_CORE_REFINE_SYMMETRY_STARTS_H_
 
@@ -30,14 +30,24 @@ struct SelfSymmetryOptions {
   // turned by a tooth 0.77-0.88 on 1,024-point objects to depth 6, between teeth ~1.1; a generic
   // object half turned 1.0-1.7).
   double max_self_distance_cells = 0.9;
+  // ... and the turn by half of it must leave the nodes at least this much farther (a gear turned
+  // by half a tooth: 1.05-1.14 cells; a smooth round object is nearer itself at half the angle).
+  double min_dip_cells = 0.15;
   // An axis is round when its two other principal variances are within this ratio.
   double min_round_ratio = 0.8;
   // Folds tried about a round axis (circular harmonics 3..max_folds).
   int max_folds = 36;
-  // A twin of the answer is tried when it leaves at least this fraction of the source's nodes
-  // (one depth above the finest) fewer without a partner within far_cells than the answer does.
-  double far_cells = 1.5;
+  // Nodes one depth above the finest farther than this from every node of the other cloud count
+  // as without a partner (TwoWayFarFraction). On 220 unseen gear pairs (the harness's ten
+  // settings, seeds 1-3) 1.9 cells told a gear's right tooth from its twins better than 1.5 or
+  // the finest depth did (tests/bench/notes/refinement-notes.md, *Gears a tooth off*).
+  double far_cells = 1.9;
+  // One of two twin answers replaces the other when it leaves at least this fraction fewer.
   double min_far_fraction_drop = 0.008;
+  // Two answers are twins when one is the other turned by a symmetry to within this angle and
+  // this fraction of the target's cube half-length (where they place the source's CoM).
+  double twin_tolerance_deg = 5.0;
+  double twin_tolerance_rel = 0.05;
 };
 
 struct SelfSymmetry {
@@ -69,6 +79,20 @@ std::optional<SymmetricTwin> BestSymmetricTwin(const Octree& source, const Octre
 // target's far from the source's (a feature the twin misplaces is missed on both sides).
 double TwoWayFarFraction(const Octree& source, const Octree& target, const Eigen::Isometry3d& T,
                          const SelfSymmetryOptions& options = {});
+
+// How much better `answer` explains the two clouds than its best twin S * answer: the least
+// two-way far fraction (nodes beyond far_cells at SymmetryDepth) of the twins minus the answer's.
+// Negative: some twin leaves fewer nodes without a partner. nullopt without symmetries (or where
+// nothing can be measured). The confidence reads it (confidence_model.h).
+std::optional<double> SymmetricTwinMargin(const Octree& source, const Octree& target,
+                                          const Eigen::Isometry3d& answer,
+                                          const std::vector<SelfSymmetry>& symmetries,
+                                          double far_cells);
+
+// Whether `a` is `b` turned by one of the symmetries (S * b, to within the options' tolerances).
+bool AreSymmetricTwins(const Octree& source, const Octree& target, const Eigen::Isometry3d& a,
+                       const Eigen::Isometry3d& b, const std::vector<SelfSymmetry>& symmetries,
+                       const SelfSymmetryOptions& options = {});
 
 // The depth both use: one above the shallower tree's deepest (at least 1).
 int SymmetryDepth(const Octree& source, const Octree& target);

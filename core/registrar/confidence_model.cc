@@ -74,6 +74,7 @@ const std::vector<std::string>& ConfidenceFeatureNames() {
       "mode_refine",
       "surface_scatter_cells",
       "noise_polished",
+      "symmetric_twin_margin",
   };
   return *names;
 }
@@ -153,6 +154,23 @@ std::vector<double> ConfidenceFeatureVector(const ConfidenceInputs& in) {
   // read up to 0.43 in net+refine when the fit knew neither).
   f[kFeatureSurfaceScatterCells] = std::max(refined.surface_scatter_cells, 0.0);
   f[kFeatureNoisePolished] = refined.noise_polished ? 1.0 : 0.0;
+  // A near-symmetric object's answer (a gear a tooth off) fits as well by every measure above as
+  // its twin does; only the few nodes of the feature that breaks the symmetry tell them apart
+  // (symmetry_starts.h). On 220 unseen gear pairs (the ten-setting harness's settings, seeds
+  // 1-3), answers whose best twin left 0.4% more of the nodes without a partner within 1.9
+  // cells than the answer did were right 95% of the time, answers whose twin left 0.4% fewer
+  // 14% or less, at a confidence of ~0.6 either way (tests/bench/notes/confidence-notes.md). No
+  // twin (most objects, every scan): the ceiling, as a margin no twin comes near.
+  constexpr double kTwinMarginFloor = -0.05;
+  constexpr double kTwinMarginCeiling = 0.02;
+  f[kFeatureSymmetricTwinMargin] = kTwinMarginCeiling;
+  if (in.symmetries != nullptr && !in.symmetries->empty()) {
+    const std::optional<double> margin = SymmetricTwinMargin(
+        *in.source, *in.target, r.T_target_source, *in.symmetries, SelfSymmetryOptions{}.far_cells);
+    if (margin.has_value()) {
+      f[kFeatureSymmetricTwinMargin] = std::clamp(*margin, kTwinMarginFloor, kTwinMarginCeiling);
+    }
+  }
   for (double& v : f) {
     if (!std::isfinite(v)) v = 0.0;
   }

@@ -29,6 +29,7 @@
 
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
+#include "core/refine/symmetry_starts.h"
 #include "core/refine/tree_refinement.h"
 #include "core/registrar/registrar.h"
 #include "core/tree/bh_tree.h"
@@ -59,6 +60,7 @@ enum ConfidenceFeature {
   kFeatureModeRefine,              // 1 in mode refine
   kFeatureSurfaceScatterCells,     // the source's scatter about the target's planes (0: unmeasured)
   kFeatureNoisePolished,           // 1 when the noise polish ran (tree_refinement.h)
+  kFeatureSymmetricTwinMargin,     // how much better the answer fits than its best symmetric twin
   kNumConfidenceFeatures,
 };
 
@@ -75,6 +77,9 @@ struct ConfidenceInputs {
   const Octree* target = nullptr;
   std::vector<Eigen::Isometry3d> net_per_pass;
   Eigen::Isometry3d refine_start = Eigen::Isometry3d::Identity();
+  // The target's near-symmetries (FindSelfSymmetries; the registrar finds them once per
+  // object-scale pair); null or empty: none.
+  const std::vector<SelfSymmetry>* symmetries = nullptr;
 };
 
 std::vector<double> ConfidenceFeatureVector(const ConfidenceInputs& inputs);

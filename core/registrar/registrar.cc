@@ -309,6 +309,14 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   absl::StatusOr<TreeRefinementResult> refined =
       RefineWithFallback(source, target, from, refinement, cache);
   double confidence_seconds = 0.0;
+  // The target's near-symmetries, object-scale pairs only: the confidence's twin margin reads
+  // them (and the experimental symmetric start). A target without a round principal axis costs
+  // one 3x3 eigen-decomposition; a round one its harmonics and one node-distance measure.
+  const auto symmetry_start = Clock::now();
+  const std::vector<SelfSymmetry> symmetries = IsDeepPair(source, target, refinement)
+                                                   ? std::vector<SelfSymmetry>{}
+                                                   : FindSelfSymmetries(target);
+  confidence_seconds += SecondsSince(symmetry_start);
   // Fills `out` from a refinement that started at `start_pose`, confidence included.
   auto settle = [&](const TreeRefinementResult& r, const Eigen::Isometry3d& start_pose,
                     RegistrationResult& out) {
@@ -333,6 +341,7 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
     inputs.target = &target;
     if (net_output != nullptr) inputs.net_per_pass = net_output->estimate.per_pass;
     inputs.refine_start = start_pose;
+    inputs.symmetries = &symmetries;
     out.confidence_features = ConfidenceFeatureVector(inputs);
     out.confidence = confidence.Confidence(out.confidence_features, out.valid, out.num_degenerate);
     confidence_seconds += SecondsSince(confidence_start);
@@ -362,10 +371,20 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
         RefineWithFallback(source, target, start_pose, refinement, cache);
     ++result.starts;
     if (!r.ok()) return;
-    bool take = ClearlyBetter(*r, best);
     std::optional<double> r_closeness;
-    if (!take && r->valid && best.valid && !ClearlyBetter(best, *r) &&
-        !NearlyEqual(r->T_target_source, best.T_target_source, source, target)) {
+    bool take = false;
+    if (r->valid && best.valid &&
+        AreSymmetricTwins(source, target, r->T_target_source, best.T_target_source, symmetries)) {
+      // Twins (a gear a tooth apart) fit alike by fitness and node distance; the few nodes of the
+      // feature that breaks the symmetry decide (symmetry_starts.h).
+      const SelfSymmetryOptions twin;
+      take = TwoWayFarFraction(source, target, r->T_target_source, twin) <=
+             TwoWayFarFraction(source, target, best.T_target_source, twin) -
+                 twin.min_far_fraction_drop;
+    } else if (ClearlyBetter(*r, best)) {
+      take = true;
+    } else if (r->valid && best.valid && !ClearlyBetter(best, *r) &&
+               !NearlyEqual(r->T_target_source, best.T_target_source, source, target)) {
       if (!best_closeness) best_closeness = closeness(best);
       r_closeness = closeness(*r);
       take = Closer(*r_closeness, *best_closeness);
@@ -403,7 +422,6 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   if (net_refine && options.try_symmetric_starts && best.valid &&
       !IsDeepPair(source, target, refinement)) {
     const SelfSymmetryOptions symmetry_options;
-    const std::vector<SelfSymmetry> symmetries = FindSelfSymmetries(target, symmetry_options);
     if (std::optional<SymmetricTwin> twin =
             BestSymmetricTwin(source, target, best.T_target_source, symmetries, symmetry_options)) {
       absl::StatusOr<TreeRefinementResult> r =

@@ -82,11 +82,35 @@ TEST(SymmetryStartsTest, TheTruthLeavesFewerNodesFarThanATurnByATooth) {
       // An answer a tooth off (either way), and the twin search from it.
       const Eigen::Isometry3d off = tooth.S * pair.T_target_source;
       EXPECT_LT(at_truth, TwoWayFarFraction(source, target, off)) << tooth.angle_deg;
-      const std::optional<SymmetricTwin> twin = BestSymmetricTwin(source, target, off, found);
+      // Any drop (the default asks for 0.8% of the nodes, which a pin of few nodes may not reach).
+      SelfSymmetryOptions any_drop;
+      any_drop.min_far_fraction_drop = 0.0;
+      const std::optional<SymmetricTwin> twin =
+          BestSymmetricTwin(source, target, off, found, any_drop);
       ASSERT_TRUE(twin.has_value()) << tooth.angle_deg;
       EXPECT_LT(twin->far_fraction, twin->answer_far_fraction);
     }
   }
+}
+
+TEST(SymmetryStartsTest, TheTwinMarginIsHigherAtTheTruthThanATurnOff) {
+  for (const ObjectPair& pair : PairsOf("gear", 3)) {
+    const Octree source = RefinementTree(pair.source, 6);
+    const Octree target = RefinementTree(pair.target, 6);
+    const std::vector<SelfSymmetry> found = FindSelfSymmetries(target);
+    ASSERT_FALSE(found.empty());
+    const std::optional<double> at_truth =
+        SymmetricTwinMargin(source, target, pair.T_target_source, found, 1.9);
+    const std::optional<double> off =
+        SymmetricTwinMargin(source, target, found.front().S * pair.T_target_source, found, 1.9);
+    ASSERT_TRUE(at_truth.has_value() && off.has_value());
+    EXPECT_GT(*at_truth, *off);
+    EXPECT_LT(*off, 0.0);  // a twin (the truth) leaves fewer nodes without a partner
+  }
+  const ObjectPair sofa = PairsOf("sofa", 1).front();
+  EXPECT_FALSE(SymmetricTwinMargin(RefinementTree(sofa.source, 6), RefinementTree(sofa.target, 6),
+                                   sofa.T_target_source, {}, 1.9)
+                   .has_value());
 }
 
 }  // namespace
