@@ -84,9 +84,11 @@ struct RegistrationOptions {
   // kept when it still leaves clearly fewer (TwoWayFarFraction) and fits no worse by fitness. A
   // refinement that ends a tooth off fits all but the feature that breaks the symmetry (a gear's
   // pin), often confidently, and no local step crosses a tooth. Off because, while it fixes gears
-  // a tooth off (unseen objects, ten settings, seed 2 mean recall 0.771 -> 0.787, seed 3 0.789 ->
+  // a tooth off (its first version, far nodes beyond 1.5 cells, before the confidence read the
+  // twins: unseen objects, ten settings, seed 2 mean recall 0.771 -> 0.787, seed 3 0.789 ->
   // 0.791), some misses it touches end farther off (a 28-degree miss at 111 degrees, at 0.83
-  // confidence): tests/bench/notes/refinement-notes.md, *Gears a tooth off*.
+  // confidence), and offline every rule that fixed many gears also turned right answers:
+  // tests/bench/notes/refinement-notes.md, *Gears a tooth off*.
   bool try_symmetric_starts = false;
   // With initial_T_target_source given: when the answer's geometry is degenerate (num_degenerate
   // > 0), its motion from the initial guess is kept only off the degenerate directions; along
