@@ -151,10 +151,4 @@ std::vector<double> FarNodeFractions(const Octree& source, const Octree& target,
   return fractions;
 }
 
-double FarNodeFraction(const Octree& source, const Octree& target,
-                       const Eigen::Isometry3d& T_target_source, int depth, double far_cells,
-                       const NodeClosenessOptions& options) {
-  return FarNodeFractions(source, target, {T_target_source}, depth, far_cells, options).front();
-}
-
 }  // namespace rpsr::core

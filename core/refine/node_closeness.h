@@ -42,15 +42,11 @@ double MeanNodeDistanceCells(const Octree& source, const Octree& target,
                              const Eigen::Isometry3d& T_target_source, int depth,
                              const NodeClosenessOptions& options = {});
 
-// The fraction of the same sampled source nodes farther than `far_cells` (below kCapCells) from
-// every target CoM of `depth`: the nodes a pose leaves without any partner nearby. A near-twin of
-// the answer (a gear turned by a tooth) fits the rest alike and differs only there, in the few
-// nodes of the feature that breaks the symmetry (symmetry_starts.h). Negative when it cannot be
-// measured (as MeanNodeDistanceCells).
-double FarNodeFraction(const Octree& source, const Octree& target,
-                       const Eigen::Isometry3d& T_target_source, int depth, double far_cells,
-                       const NodeClosenessOptions& options = {});
-// The same for several poses (the target's lookup built once): one fraction per pose.
+// Per pose (the target's lookup built once for all): the fraction of the same sampled source
+// nodes farther than `far_cells` (below kCapCells) from every target CoM of `depth`, the nodes the
+// pose leaves without any partner nearby. A near-twin of the answer (a gear turned by a tooth)
+// fits the rest alike and differs only there, in the few nodes of the feature that breaks the
+// symmetry (symmetry_starts.h). Negative where it cannot be measured (as MeanNodeDistanceCells).
 std::vector<double> FarNodeFractions(const Octree& source, const Octree& target,
                                      const std::vector<Eigen::Isometry3d>& poses, int depth,
                                      double far_cells, const NodeClosenessOptions& options = {});

@@ -121,6 +121,27 @@ std::vector<double> TwoWayFarFractions(const Octree& source, const Octree& targe
   return two_way;
 }
 
+// The answer's and its twins' (S * answer) two-way far fractions, and the twin whose is least.
+struct TwinsScored {
+  std::vector<Eigen::Isometry3d> poses;  // the answer, then its twins
+  std::vector<double> far;               // per pose; negative where unmeasured
+  int best = -1;                         // the least measured twin's index, -1 when none
+};
+
+TwinsScored ScoreTwins(const Octree& source, const Octree& target, const Eigen::Isometry3d& answer,
+                       const std::vector<SelfSymmetry>& symmetries, double far_cells) {
+  TwinsScored scored;
+  scored.poses = {answer};
+  for (const SelfSymmetry& symmetry : symmetries) scored.poses.push_back(symmetry.S * answer);
+  scored.far = TwoWayFarFractions(source, target, scored.poses, far_cells);
+  for (size_t k = 1; k < scored.far.size(); ++k) {
+    if (scored.far[k] >= 0.0 && (scored.best < 0 || scored.far[k] < scored.far[scored.best])) {
+      scored.best = static_cast<int>(k);
+    }
+  }
+  return scored;
+}
+
 }  // namespace
 
 double TwoWayFarFraction(const Octree& source, const Octree& target, const Eigen::Isometry3d& T,
@@ -133,16 +154,9 @@ std::optional<double> SymmetricTwinMargin(const Octree& source, const Octree& ta
                                           const std::vector<SelfSymmetry>& symmetries,
                                           double far_cells) {
   if (symmetries.empty()) return std::nullopt;
-  std::vector<Eigen::Isometry3d> poses = {answer};
-  for (const SelfSymmetry& symmetry : symmetries) poses.push_back(symmetry.S * answer);
-  const std::vector<double> far = TwoWayFarFractions(source, target, poses, far_cells);
-  if (far.front() < 0.0) return std::nullopt;
-  double least = -1.0;
-  for (size_t k = 1; k < far.size(); ++k) {
-    if (far[k] >= 0.0 && (least < 0.0 || far[k] < least)) least = far[k];
-  }
-  if (least < 0.0) return std::nullopt;
-  return least - far.front();
+  const TwinsScored scored = ScoreTwins(source, target, answer, symmetries, far_cells);
+  if (scored.far.front() < 0.0 || scored.best < 0) return std::nullopt;
+  return scored.far[scored.best] - scored.far.front();
 }
 
 bool AreSymmetricTwins(const Octree& source, const Octree& target, const Eigen::Isometry3d& a,
@@ -167,19 +181,12 @@ std::optional<SymmetricTwin> BestSymmetricTwin(const Octree& source, const Octre
                                                const std::vector<SelfSymmetry>& symmetries,
                                                const SelfSymmetryOptions& options) {
   if (symmetries.empty()) return std::nullopt;
-  std::vector<Eigen::Isometry3d> poses = {answer};
-  for (const SelfSymmetry& symmetry : symmetries) poses.push_back(symmetry.S * answer);
-  const std::vector<double> far = TwoWayFarFractions(source, target, poses, options.far_cells);
+  const TwinsScored scored = ScoreTwins(source, target, answer, symmetries, options.far_cells);
+  if (scored.far.front() < 0.0 || scored.best < 0) return std::nullopt;
   SymmetricTwin best;
-  best.answer_far_fraction = far.front();
-  if (best.answer_far_fraction < 0.0) return std::nullopt;
-  best.far_fraction = 2.0;
-  for (size_t k = 1; k < far.size(); ++k) {
-    if (far[k] >= 0.0 && far[k] < best.far_fraction) {
-      best.far_fraction = far[k];
-      best.T_target_source = poses[k];
-    }
-  }
+  best.answer_far_fraction = scored.far.front();
+  best.far_fraction = scored.far[scored.best];
+  best.T_target_source = scored.poses[scored.best];
   if (best.far_fraction > best.answer_far_fraction - options.min_far_fraction_drop) {
     return std::nullopt;
   }

@@ -3,7 +3,7 @@
 // everything but that feature. By fitness, inlier RMSE and the nodes' mean distance it fits as
 // well as the truth (unseen gears refined from the truth read no better), and no local step
 // crosses a tooth. What tells the twins apart is the feature's few nodes left without any partner
-// nearby (FarNodeFraction, node_closeness.h).
+// nearby (FarNodeFractions, node_closeness.h).
 //
 // FindSelfSymmetries finds the target's near-symmetries on its tree alone: about a principal
 // axis around which the spread is round (its two other principal variances alike, as an n-fold
@@ -55,6 +55,7 @@ struct SelfSymmetry {
   Eigen::Isometry3d S = Eigen::Isometry3d::Identity();
   int axis = 0;  // principal axis, 0 = the smallest variance
   double angle_deg = 0.0;
+  // The turn by 1/n's (the one checked; its multiples carry the same value).
   double self_distance_cells = 0.0;
 };
 

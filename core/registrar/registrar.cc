@@ -419,8 +419,8 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   // target has near-symmetries, whatever the confidence (a tooth off reads confident). The twin
   // is kept when, refined, it still leaves clearly fewer source nodes without a partner and does
   // not fit clearly worse; the other starts' rule would not take it (the twins fit alike).
-  if (net_refine && options.try_symmetric_starts && best.valid &&
-      !IsDeepPair(source, target, refinement)) {
+  // (`symmetries` is empty for scene-scale pairs.)
+  if (net_refine && options.try_symmetric_starts && best.valid) {
     const SelfSymmetryOptions symmetry_options;
     if (std::optional<SymmetricTwin> twin =
             BestSymmetricTwin(source, target, best.T_target_source, symmetries, symmetry_options)) {

@@ -66,22 +66,28 @@ TEST(NodeClosenessTest, NodesWithoutAPartnerWithinTwoCellsCountTheCap) {
               NodeClosenessOptions::kCapCells, 1e-9);
 }
 
-TEST(NodeClosenessTest, FarNodeFractionCountsTheNodesBeyondTheThreshold) {
+TEST(NodeClosenessTest, FarNodeFractionsCountTheNodesBeyondTheThresholdPerPose) {
   const Octree tree = RefinementTree(Lattice(), kDepth);
   const double edge = EdgeOf(tree, kDepth);
-  EXPECT_EQ(FarNodeFraction(tree, tree, Eigen::Isometry3d::Identity(), kDepth, 1.5), 0.0);
-  // Every node 1 cell off: within 1.5 cells, beyond 0.5.
   const Eigen::Isometry3d one_cell = Shift(Eigen::Vector3d(edge, 0, 0));
-  EXPECT_EQ(FarNodeFraction(tree, tree, one_cell, kDepth, 1.5), 0.0);
-  EXPECT_EQ(FarNodeFraction(tree, tree, one_cell, kDepth, 0.5), 1.0);
+  const std::vector<double> far =
+      FarNodeFractions(tree, tree,
+                       {Eigen::Isometry3d::Identity(), one_cell, Shift(Eigen::Vector3d(0.25, 0, 0)),
+                        Shift(Eigen::Vector3d(0.5, 0, 0))},
+                       kDepth, 1.5);
+  ASSERT_EQ(far.size(), 4u);
+  EXPECT_EQ(far[0], 0.0);
+  // Every node 1 cell off: within 1.5 cells, beyond 0.5.
+  EXPECT_EQ(far[1], 0.0);
+  EXPECT_EQ(FarNodeFractions(tree, tree, {one_cell}, kDepth, 0.5).front(), 1.0);
   // The 25 nodes of the lattice's last x layer moved out of the cube, the rest onto their
   // neighbours 0.5 away (~16 cells: beyond the cap, so far as well): all far.
-  EXPECT_EQ(FarNodeFraction(tree, tree, Shift(Eigen::Vector3d(0.25, 0, 0)), kDepth, 1.5), 1.0);
+  EXPECT_EQ(far[2], 1.0);
   // Moved by a whole lattice step, 100 of the 125 land on a node again.
-  EXPECT_NEAR(FarNodeFraction(tree, tree, Shift(Eigen::Vector3d(0.5, 0, 0)), kDepth, 1.5),
-              25.0 / 125.0, 1e-9);
-  EXPECT_LT(FarNodeFraction(tree, tree, Eigen::Isometry3d::Identity(), 0, 1.5), 0.0);
-  EXPECT_LT(FarNodeFraction(tree, tree, Eigen::Isometry3d::Identity(), kDepth + 1, 1.5), 0.0);
+  EXPECT_NEAR(far[3], 25.0 / 125.0, 1e-9);
+  EXPECT_LT(FarNodeFractions(tree, tree, {Eigen::Isometry3d::Identity()}, 0, 1.5).front(), 0.0);
+  EXPECT_LT(FarNodeFractions(tree, tree, {Eigen::Isometry3d::Identity()}, kDepth + 1, 1.5).front(),
+            0.0);
 }
 
 TEST(NodeClosenessTest, TheSampleIsAnEvenStrideOverTheSourceNodes) {
