@@ -799,11 +799,12 @@ absl::Status ValidateInputs(const Octree& source, const Octree& target,
       !(o.covariance_epsilon <= 1) || !(o.coarse_covariance_epsilon > 0) ||
       !(o.coarse_covariance_epsilon <= 1) || !(o.robust_scale_cells > 0) ||
       !(o.inlier_distance_cells > 0) || !(o.fitness_min_mean_count >= 0) || !(o.damping >= 0) ||
-      !(o.coarse_epsilon_factor >= 1) || !(o.degeneracy_threshold >= 0) || !(o.min_fitness >= 0)) {
+      !(o.coarse_epsilon_factor >= 1) || !(o.degeneracy_threshold >= 0) || !(o.min_fitness >= 0) ||
+      !(o.settled_step_cells >= 0)) {
     return absl::InvalidArgumentError(
         "RefineOnTrees: epsilons, distances and scales must be positive (covariance_epsilon and "
-        "coarse_covariance_epsilon in (0, 1]); damping, degeneracy_threshold and min_fitness "
-        "non-negative");
+        "coarse_covariance_epsilon in (0, 1]); damping, degeneracy_threshold, min_fitness and "
+        "settled_step_cells non-negative");
   }
   return absl::OkStatus();
 }
@@ -1031,7 +1032,9 @@ StageOutcome RunStage(const Octree& source, const Octree& target, DepthData& dat
       // it the damped step was the refused one again (82% of an object's finest iterations were
       // refusals climbing 1e-5, 1e-4, ... each a linearisation of both depths).
       damping = std::max(damping * 10.0, kFirstRefusedDamping);
-      if (small || damping > 1e4) {
+      const double shift = std::sqrt(v.squaredNorm() + angle * angle * l2);
+      const bool settled = shift < options.settled_step_cells * data.edge_target;
+      if (small || settled || damping > 1e4) {
         stage.converged = true;
         break;
       }

@@ -72,6 +72,59 @@ TEST(TreeRefinementTest, ObjectsConvergeFromNetworkSizedErrors) {
   }
 }
 
+// A refused finest step shorter than settled_step_cells ends the stage: fewer iterations, and the
+// answer no farther from the one the damped retries would have crept to than a small part of a
+// cell (TreeRefinementOptions::settled_step_cells). Unseen objects from network-sized errors, and
+// a simulated scan pair from the identity, where the retries were most of the finest stage.
+TEST(TreeRefinementTest, SettledRefusedStepsEndTheFinestStage) {
+  TreeRefinementOptions retrying;
+  retrying.settled_step_cells = 0.0;
+  const TreeRefinementOptions settling;
+  ASSERT_GT(settling.settled_step_cells, 0.0);
+  int iterations_retrying = 0;
+  int iterations_settling = 0;
+  const auto compare = [&](const Octree& source, const Octree& target,
+                           const Eigen::Isometry3d& initial, const std::string& what) {
+    auto a = RefineOnTrees(source, target, initial, retrying);
+    auto b = RefineOnTrees(source, target, initial, settling);
+    ASSERT_TRUE(a.ok()) << a.status();
+    ASSERT_TRUE(b.ok()) << b.status();
+    ASSERT_FALSE(a->stages.empty());
+    ASSERT_FALSE(b->stages.empty());
+    EXPECT_LE(b->stages.back().iterations, a->stages.back().iterations) << what;
+    iterations_retrying += a->stages.back().iterations;
+    iterations_settling += b->stages.back().iterations;
+    // Displacement at the target cube's half-length, in finest cells.
+    const double edge = a->stages.back().cell_edge;
+    const Eigen::AngleAxisd turn(a->T_target_source.linear().transpose() *
+                                 b->T_target_source.linear());
+    const double shift =
+        (a->T_target_source.translation() - b->T_target_source.translation()).norm();
+    EXPECT_LT((shift + turn.angle() * target.half_length()) / edge, 0.1) << what;
+    EXPECT_EQ(a->valid, b->valid) << what;
+  };
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> angle(5.0, 15.0);
+  std::uniform_real_distribution<double> offset(0.05, 0.1);
+  for (uint64_t seed = 1; seed <= 8; ++seed) {
+    auto pair = MakeObjectPair(UnseenPairs(DisturbanceKind::kNone, 0), seed);
+    ASSERT_TRUE(pair.ok()) << pair.status();
+    const Octree source = RefinementTree(pair->source, 6);
+    const Octree target = RefinementTree(pair->target, 6);
+    compare(source, target, Perturbed(pair->T_target_source, angle(rng) * kDeg, offset(rng), rng),
+            "object seed " + std::to_string(seed));
+  }
+  LidarSequenceOptions lidar;
+  lidar.frame_count = 6;
+  lidar.seed = 3;
+  auto sequence = LidarSequenceSimulator::Create(lidar);
+  ASSERT_TRUE(sequence.ok()) << sequence.status();
+  const Octree target = RefinementTree(sequence->SimulateFrame(0).cloud, 9);
+  const Octree source = RefinementTree(sequence->SimulateFrame(5).cloud, 9);
+  compare(source, target, Eigen::Isometry3d::Identity(), "scan pair");
+  EXPECT_LT(iterations_settling, iterations_retrying);
+}
+
 // From network-sized errors (5-15 degrees, 0.05-0.1), unseen objects with their source jittered
 // by up to 0.03. With the source's own
 // coarse cells the coarse stages drift along weakly constrained directions (a laptop's hinge, a
