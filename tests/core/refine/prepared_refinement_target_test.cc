@@ -20,6 +20,7 @@ namespace {
 using testing_util::ExpectSameRefinement;
 using testing_util::Perturbed;
 using testing_util::RefinementTree;
+using testing_util::SimulatedScanPair;
 using testing_util::Sphere;
 
 constexpr double kDeg = M_PI / 180.0;
@@ -125,10 +126,10 @@ TEST(PreparedRefinementTargetTest, SameResultOnALidarPair) {
   LidarSequenceOptions options;
   options.frame_count = 3;
   options.seed = 5;
-  auto sequence = LidarSequenceSimulator::Create(options);
-  ASSERT_TRUE(sequence.ok()) << sequence.status();
-  const Octree target = RefinementTree(sequence->SimulateFrame(0).cloud, 9);
-  const Octree source = RefinementTree(sequence->SimulateFrame(2).cloud, 9);
+  auto scans = SimulatedScanPair(options, 0, 2);
+  ASSERT_TRUE(scans.ok()) << scans.status();
+  const Octree& source = scans->source;
+  const Octree& target = scans->target;
   auto prepared = PreparedRefinementTarget::Prepare(target);
   ASSERT_TRUE(prepared.ok()) << prepared.status();
   for (int coarsest : {-1, 5}) {
@@ -155,10 +156,10 @@ TEST(PreparedRefinementTargetTest, ChosenLineRuleOnASparseScanReadsThePreparedSi
   options.frame_count = 3;
   options.seed = 5;
   options.sensor = *LidarSensorPreset("vlp16");
-  auto sequence = LidarSequenceSimulator::Create(options);
-  ASSERT_TRUE(sequence.ok()) << sequence.status();
-  const Octree target = RefinementTree(sequence->SimulateFrame(1).cloud, 9);
-  const Octree source = RefinementTree(sequence->SimulateFrame(2).cloud, 9);
+  auto scans = SimulatedScanPair(options, 1, 2);
+  ASSERT_TRUE(scans.ok()) << scans.status();
+  const Octree& source = scans->source;
+  const Octree& target = scans->target;
   auto prepared = PreparedRefinementTarget::Prepare(target);
   ASSERT_TRUE(prepared.ok()) << prepared.status();
   ASSERT_TRUE((*prepared)->line_shaped_fraction().has_value());

@@ -1,5 +1,6 @@
 // What the refinement's tests share beyond geometry: unseen object pairs, trees built as the
-// refinement reads them, and the comparison of two results that must be the same bit for bit.
+// refinement reads them, simulated scan pairs, and the comparison of two results that must be the
+// same bit for bit.
 #ifndef RPSR_TESTS_CORE_REFINE_REFINEMENT_TEST_UTIL_H_
 #define RPSR_TESTS_CORE_REFINE_REFINEMENT_TEST_UTIL_H_
 
@@ -13,6 +14,7 @@
 #include "core/data/object_pairs.h"
 #include "core/data/registration_metrics.h"
 #include "core/refine/tree_refinement.h"
+#include "core/synth/lidar_sequence.h"
 #include "core/tree/bh_tree.h"
 #include "gtest/gtest.h"
 #include "tests/core/refine/refinement_test_geometry.h"
@@ -36,6 +38,23 @@ inline Octree RefinementTree(const PointCloud& cloud, int max_depth) {
   auto tree = BuildOctree(cloud, options);
   EXPECT_TRUE(tree.ok()) << tree.status();
   return *std::move(tree);
+}
+
+// Two frames of a simulated sequence as refinement trees of depth 9 (the CLI's depth for scenes)
+// and the true motion between them.
+struct ScanPairTrees {
+  Octree source;
+  Octree target;
+  Eigen::Isometry3d T_target_source;
+};
+inline absl::StatusOr<ScanPairTrees> SimulatedScanPair(const LidarSequenceOptions& options,
+                                                       int target_frame, int source_frame) {
+  absl::StatusOr<LidarSequenceSimulator> sequence = LidarSequenceSimulator::Create(options);
+  if (!sequence.ok()) return sequence.status();
+  return ScanPairTrees{
+      RefinementTree(sequence->SimulateFrame(source_frame).cloud, 9),
+      RefinementTree(sequence->SimulateFrame(target_frame).cloud, 9),
+      sequence->T_world_lidar()[target_frame].inverse() * sequence->T_world_lidar()[source_frame]};
 }
 
 // Refines `pairs` object pairs of `pair_options` (seeds 1000..) from the truth perturbed by

@@ -33,6 +33,7 @@ using testing_util::FailuresFromPerturbedStarts;
 using testing_util::Perturbed;
 using testing_util::Plane;
 using testing_util::RefinementTree;
+using testing_util::SimulatedScanPair;
 using testing_util::Sphere;
 using testing_util::UnseenPairs;
 
@@ -117,11 +118,9 @@ TEST(TreeRefinementTest, SettledRefusedStepsEndTheFinestStage) {
   LidarSequenceOptions lidar;
   lidar.frame_count = 6;
   lidar.seed = 3;
-  auto sequence = LidarSequenceSimulator::Create(lidar);
-  ASSERT_TRUE(sequence.ok()) << sequence.status();
-  const Octree target = RefinementTree(sequence->SimulateFrame(0).cloud, 9);
-  const Octree source = RefinementTree(sequence->SimulateFrame(5).cloud, 9);
-  compare(source, target, Eigen::Isometry3d::Identity(), "scan pair");
+  auto scans = SimulatedScanPair(lidar, 0, 5);
+  ASSERT_TRUE(scans.ok()) << scans.status();
+  compare(scans->source, scans->target, Eigen::Isometry3d::Identity(), "scan pair");
   EXPECT_LT(iterations_settling, iterations_retrying);
 }
 
@@ -266,16 +265,11 @@ TEST(TreeRefinementTest, SimulatedLidarPairFiveFramesApartFromIdentity) {
   LidarSequenceOptions options;
   options.frame_count = 8;
   options.seed = 3;
-  auto sequence = LidarSequenceSimulator::Create(options);
-  ASSERT_TRUE(sequence.ok()) << sequence.status();
-  const PointCloud target_cloud = sequence->SimulateFrame(0).cloud;
-  const PointCloud source_cloud = sequence->SimulateFrame(5).cloud;
-  const Eigen::Isometry3d truth =
-      sequence->T_world_lidar()[0].inverse() * sequence->T_world_lidar()[5];
+  auto scans = SimulatedScanPair(options, 0, 5);
+  ASSERT_TRUE(scans.ok()) << scans.status();
+  const Eigen::Isometry3d truth = scans->T_target_source;
   ASSERT_GT(truth.translation().norm(), 2.0);  // a real motion, not a near-identity
-  const Octree source = RefinementTree(source_cloud, 9);
-  const Octree target = RefinementTree(target_cloud, 9);
-  auto result = RefineOnTrees(source, target, Eigen::Isometry3d::Identity());
+  auto result = RefineOnTrees(scans->source, scans->target, Eigen::Isometry3d::Identity());
   ASSERT_TRUE(result.ok()) << result.status();
   const PairError error = ErrorOf(result->T_target_source, truth);
   EXPECT_LT(error.rotation_deg, 0.2);
