@@ -1020,6 +1020,18 @@ StageOutcome RunStage(const Octree& source, const Octree& target, DepthData& dat
     ++stage.iterations;
     ++result.iterations;
     const bool small = angle < rotation_epsilon && v.norm() < translation_epsilon;
+    if (small && !is_finest) {
+      // A coarse stage takes every step, and this one ends it: linearising at its pose only to
+      // stop would be wasted (a coarse stage's system and statistics are not read beyond the
+      // overlap check, which the last linearisation, a small step away, answers as well). On
+      // scans that was about one linearisation in two of depths 6-8 (session 24).
+      R = next_R;
+      t = next_t;
+      stage.last_update_rotation_rad = angle;
+      stage.last_update_translation = v.norm();
+      stage.converged = true;
+      break;
+    }
     // A step the step control may refuse is judged by its cost alone; its system is assembled
     // only once it is accepted.
     const bool controlled = options.step_control && is_finest;
