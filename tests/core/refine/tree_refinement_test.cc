@@ -635,6 +635,15 @@ TEST(TreeRefinementTest, RejectsBadInputs) {
   options.max_iterations_per_depth = 0;
   EXPECT_EQ(RefineOnTrees(tree, tree, Eigen::Isometry3d::Identity(), options).status().code(),
             absl::StatusCode::kInvalidArgument);
+  options = {};
+  options.settled_step_cells = std::nan("");
+  EXPECT_THAT(RefineOnTrees(tree, tree, Eigen::Isometry3d::Identity(), options).status().message(),
+              HasSubstr("settled_step_cells"));
+  options.settled_step_cells = -0.01;
+  EXPECT_EQ(RefineOnTrees(tree, tree, Eigen::Isometry3d::Identity(), options).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  options = {};
+  options.max_iterations_per_depth = 0;
   // ValidateTreeRefinement is the same check alone.
   EXPECT_EQ(ValidateTreeRefinement(tree, tree, Eigen::Isometry3d::Identity(), options).code(),
             absl::StatusCode::kInvalidArgument);
