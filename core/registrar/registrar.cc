@@ -311,11 +311,19 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   double confidence_seconds = 0.0;
   // The target's near-symmetries, object-scale pairs only: the confidence's twin margin reads
   // them (and the experimental symmetric start). A target without a round principal axis costs
-  // one 3x3 eigen-decomposition; a round one its harmonics and one node-distance measure.
+  // one 3x3 eigen-decomposition; a round one its harmonics and one node-distance measure. A
+  // prepared target found them once.
   const auto symmetry_start = Clock::now();
-  const std::vector<SelfSymmetry> symmetries = IsDeepPair(source, target, refinement)
-                                                   ? std::vector<SelfSymmetry>{}
-                                                   : FindSelfSymmetries(target);
+  std::vector<SelfSymmetry> found_here;
+  const std::vector<SelfSymmetry>* symmetries_of_target = &found_here;
+  if (!IsDeepPair(source, target, refinement)) {
+    if (prepared != nullptr && prepared->symmetries.has_value()) {
+      symmetries_of_target = &*prepared->symmetries;
+    } else {
+      found_here = FindSelfSymmetries(target);
+    }
+  }
+  const std::vector<SelfSymmetry>& symmetries = *symmetries_of_target;
   confidence_seconds += SecondsSince(symmetry_start);
   // Fills `out` from a refinement that started at `start_pose`, confidence included.
   auto settle = [&](const TreeRefinementResult& r, const Eigen::Isometry3d& start_pose,
@@ -494,6 +502,11 @@ absl::StatusOr<std::shared_ptr<const PreparedTarget>> Registrar::PrepareTarget(
   if (!refinement.ok()) return refinement.status();
   prepared->refinement = *std::move(refinement);
   prepared->bytes_ += prepared->refinement->bytes();
+  // Object-scale on its own, so with any source at the default depths: Finish reads them.
+  if (!IsDeepPair(target, target, TreeRefinementOptions{})) {
+    prepared->symmetries = FindSelfSymmetries(target);
+    prepared->bytes_ += prepared->symmetries->size() * sizeof(SelfSymmetry);
+  }
   return std::shared_ptr<const PreparedTarget>(std::move(prepared));
 }
 

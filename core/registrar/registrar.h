@@ -21,6 +21,7 @@
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
 #include "absl/types/span.h"
+#include "core/refine/symmetry_starts.h"
 #include "core/refine/tree_refinement.h"
 #include "core/tree/bh_tree.h"
 
@@ -177,7 +178,8 @@ class NetTargetEncoding;  // core/net/rpsr_net.h
 // map, the last frame of a stream): the network's encoding of the target (about 30% of an object
 // pair's network time with two passes; registrar_bench, BM_RegisterObjectsPreparedTarget) and the
 // refinement's target side (PreparedRefinementTarget: its cell indexes and node shapes; ~0.1-0.2
-// ms of an object pair's refinement, ~1.3 ms of a 120k-point scan's). Immutable and safe to share
+// ms of an object pair's refinement, ~1.3 ms of a 120k-point scan's) and an object-scale target's
+// near-symmetries (~0.3-0.5 ms an object pair on the AVX2 host). Immutable and safe to share
 // across threads; valid with the Registrar that made it, for the tree it was made from (which must
 // outlive it).
 class PreparedTarget {
@@ -196,6 +198,9 @@ class PreparedTarget {
   const void* registrar_ = nullptr;
   std::shared_ptr<const NetTargetEncoding> net_encoding;
   std::shared_ptr<const PreparedRefinementTarget> refinement;
+  // The target's near-symmetries (FindSelfSymmetries), found once when it is object-scale on its
+  // own (a scene's are never read); unset otherwise, and a pair that needs them finds its own.
+  std::optional<std::vector<SelfSymmetry>> symmetries;
   size_t bytes_ = 0;
 };
 

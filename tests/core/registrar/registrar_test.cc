@@ -15,6 +15,7 @@
 #include "core/data/transform_convention.h"
 #include "core/registrar/confidence_model.h"
 #include "core/registrar/embedded_models.h"
+#include "core/synth/seeded_random.h"
 #include "core/synth/shape_families.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
@@ -256,6 +257,33 @@ TEST(RegistrarBatchTest, BatchEqualsPairsOneByOne) {
     ASSERT_TRUE(r.ok());
     EXPECT_EQ(r->mode, RegistrationMode::kNetRefine);
   }
+}
+
+// A gear's teeth are found once with its prepared target (PreparedTarget::symmetries) and read as
+// Register finds them: the same answer, confidence and twin margin, which a gear reads below the
+// ceiling of a target without twins.
+TEST(RegistrarPreparedTargetTest, AGearsSymmetriesPreparedOnceGiveTheSameAnswer) {
+  PairOptions pair_options;
+  pair_options.split = ObjectSplit::kM2Unseen;
+  int gears = 0;
+  for (uint64_t i = 0; i < 200 && gears < 2; ++i) {
+    absl::StatusOr<ObjectPair> pair = MakeObjectPair(pair_options, DeriveSeed(5, i));
+    ASSERT_TRUE(pair.ok()) << pair.status();
+    if (ShapeFamilies()[pair->family_index].name != "gear") continue;
+    ++gears;
+    const Octree source = TreeOf(pair->source);
+    const Octree target = TreeOf(pair->target);
+    auto prepared = SharedRegistrar().PrepareTarget(target);
+    ASSERT_TRUE(prepared.ok()) << prepared.status();
+    auto plain = SharedRegistrar().Register(source, target);
+    auto with = SharedRegistrar().Register(source, **prepared);
+    ASSERT_TRUE(plain.ok() && with.ok()) << plain.status() << with.status();
+    EXPECT_EQ(plain->T_target_source.matrix(), with->T_target_source.matrix());
+    EXPECT_EQ(plain->confidence, with->confidence);
+    EXPECT_EQ(plain->confidence_features, with->confidence_features);
+    EXPECT_LT(with->confidence_features[kFeatureSymmetricTwinMargin], 0.02);
+  }
+  EXPECT_EQ(gears, 2);
 }
 
 // A prepared target (PrepareTarget) gives Register's answer for each mode (the network's part on
