@@ -1020,15 +1020,18 @@ StageOutcome RunStage(const Octree& source, const Octree& target, DepthData& dat
     ++stage.iterations;
     ++result.iterations;
     const bool small = angle < rotation_epsilon && v.norm() < translation_epsilon;
+    const auto take_step = [&] {
+      R = next_R;
+      t = next_t;
+      stage.last_update_rotation_rad = angle;
+      stage.last_update_translation = v.norm();
+    };
     if (small && !is_finest) {
       // A coarse stage takes every step, and this one ends it: linearising at its pose only to
       // stop would be wasted (a coarse stage's system and statistics are not read beyond the
       // overlap check, which the last linearisation, a small step away, answers as well). On
       // scans that was about one linearisation in two of depths 6-8 (session 24).
-      R = next_R;
-      t = next_t;
-      stage.last_update_rotation_rad = angle;
-      stage.last_update_translation = v.norm();
+      take_step();
       stage.converged = true;
       break;
     }
@@ -1052,15 +1055,12 @@ StageOutcome RunStage(const Octree& source, const Octree& target, DepthData& dat
       }
       continue;
     }
-    R = next_R;
-    t = next_t;
+    take_step();
     if (controlled) CompleteStageSystem(corr, coarser, next);
     lin = std::move(next);
     stage.correspondences = lin.correspondences;
     stage.coarser_correspondences = lin.coarser_correspondences;
     damping = std::max(damping * 0.1, options.damping);
-    stage.last_update_rotation_rad = angle;
-    stage.last_update_translation = v.norm();
     if (small) {
       stage.converged = true;
       break;
