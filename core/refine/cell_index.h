@@ -3,17 +3,21 @@
 // (about a fifth of the node visits on 2,048-point objects), so it sits in the refinement's
 // innermost loop.
 //
-// Why two representations: a hash lookup costs ~25 ns (hashing, probing, a random access), and
+// Why three representations: a hash lookup costs ~25 ns (hashing, probing, a random access), and
 // those lookups were over half of the search's time. A level's nodes are listed by strictly
 // ascending Morton code (Octree::Level::morton), so a node's index is simply its code's rank among
 // the occupied cells: one bit per cell plus a running count per 64 cells (1.5 bits a cell)
 // answers with a bit test and a popcount. Memory decides the form: with at most 64 cells a node
 // that is at most 12 bytes a node (a hash map holds ~17 per slot, 15-23 a node), and a level of
-// at most 2^18 cells (an octree's depths 0-6) costs at most 48 KB whatever its nodes; otherwise
-// (a scan's deep, sparse levels: its depth 9 has ~130M cells for ~50k nodes) the hash map. So an
+// at most 2^18 cells (an octree's depths 0-6) costs at most 48 KB whatever its nodes. So an
 // object's depths 3-6 are dense by the size clause (~55 KB in all, more than the hash map on a
-// sparse object's depth 6), and so are a scan's coarse depths. Same answers either way
-// (tests/core/refine/cell_index_test.cc).
+// sparse object's depth 6), and so are a scan's coarse depths. A scan's deep, sparse levels (its
+// depth 9 has ~130M cells for ~50k nodes) are blocked: the same ranks, kept only for the blocks
+// of 8^3 cells that hold a node, found through a dense index of the blocks three depths up. Its
+// memory is the hash map's or less, and a search's 8 neighbouring cells mostly lie in one block
+// (one cache line of bits), where a hash map's 8 lookups were 8 random accesses (its probes were
+// a seventh of a scan's linearisations). Sparser levels, or deeper ones than 9, are hashed.
+// Same answers in every form (tests/core/refine/cell_index_test.cc).
 #ifndef RPSR_CORE_REFINE_CELL_INDEX_H_
 #define RPSR_CORE_REFINE_CELL_INDEX_H_
 
@@ -33,10 +37,17 @@ namespace rpsr::core {
 
 class CellIndex {
  public:
+  // How a level is indexed (see the file comment).
+  enum class Form { kDense, kBlocked, kHashed };
   // The dense form is taken when the level has at most this many cells per node (or at most
-  // kSmallLevelCells cells in all, where the hash map's fixed costs dominate).
+  // kSmallLevelCells cells in all, where the other forms' fixed costs dominate).
   static constexpr uint64_t kMaxDenseCellsPerNode = 64;
   static constexpr uint64_t kSmallLevelCells = uint64_t{1} << 18;  // depth 6 of an octree
+  // The blocked form: blocks of 8^3 cells (a cell of the level three depths up), taken when that
+  // coarser level fits kSmallLevelCells (depths 7-9) and the blocks cost at most this many bytes
+  // a node (a hash map's ~15-23; a scan's depth 9 holds ~10-30 nodes a block, ~3-9 bytes a node).
+  static constexpr int kBlockDepths = 3;
+  static constexpr uint64_t kMaxBlockedBytesPerNode = 24;
 
   CellIndex() = default;
   // `codes`: a level's Morton codes, strictly ascending; `depth`: the level's depth (an octree's
@@ -49,46 +60,55 @@ class CellIndex {
            std::adjacent_find(codes.begin(), codes.end()) == codes.end() &&
            (codes.empty() || codes.back() < cells));
     const uint64_t nodes = codes.size();
-    dense_ = cells <= kSmallLevelCells || cells <= kMaxDenseCellsPerNode * nodes;
-    if (!dense_) {
-      hash_.reserve(codes.size());
-      for (size_t j = 0; j < codes.size(); ++j) hash_.emplace(codes[j], static_cast<int32_t>(j));
+    if (cells <= kSmallLevelCells || cells <= kMaxDenseCellsPerNode * nodes) {
+      form_ = Form::kDense;
+      dense_.Build(codes, cells);
       return;
     }
-    const size_t words = static_cast<size_t>((cells + 63) / 64);
-    occupied_.assign(words, 0);
-    for (uint64_t code : codes) occupied_[code >> 6] |= uint64_t{1} << (code & 63);
-    rank_.resize(words);
-    int32_t before = 0;
-    for (size_t w = 0; w < words; ++w) {
-      rank_[w] = before;
-      before += PopCount(occupied_[w]);
+    if (depth - kBlockDepths >= 0 && (cells >> (3 * kBlockDepths)) <= kSmallLevelCells &&
+        TryBlocks(codes, cells)) {
+      form_ = Form::kBlocked;
+      return;
     }
+    form_ = Form::kHashed;
+    hash_.reserve(codes.size());
+    for (size_t j = 0; j < codes.size(); ++j) hash_.emplace(codes[j], static_cast<int32_t>(j));
   }
 
   // The node at `code`, or -1 when the cell is empty (or outside the level).
   int32_t Find(uint64_t code) const {
-    if (!dense_) {
-      const auto it = hash_.find(code);
-      return it == hash_.end() ? -1 : it->second;
+    switch (form_) {
+      case Form::kDense:
+        return dense_.Find(code);
+      case Form::kBlocked: {
+        const int32_t b = top_.Find(code >> kBlockShift);
+        if (b < 0) return -1;
+        const Block& block = blocks_[static_cast<size_t>(b)];
+        const uint64_t low = code & (kBlockCells - 1);
+        const uint64_t bits = block.bits[low >> 6];
+        const uint64_t bit = uint64_t{1} << (low & 63);
+        if ((bits & bit) == 0) return -1;
+        return block.first + block.before[low >> 6] + PopCount(bits & (bit - 1));
+      }
+      case Form::kHashed:
+        break;
     }
-    const uint64_t word = code >> 6;
-    if (word >= occupied_.size()) return -1;
-    const uint64_t bits = occupied_[word];
-    const uint64_t bit = uint64_t{1} << (code & 63);
-    if ((bits & bit) == 0) return -1;
-    return rank_[word] + PopCount(bits & (bit - 1));
+    const auto it = hash_.find(code);
+    return it == hash_.end() ? -1 : it->second;
   }
 
-  bool dense() const { return dense_; }
+  Form form() const { return form_; }
+  bool dense() const { return form_ == Form::kDense; }
 
   size_t bytes() const {
-    return sizeof(*this) + occupied_.capacity() * sizeof(uint64_t) +
-           rank_.capacity() * sizeof(int32_t) +
+    return sizeof(*this) + dense_.bytes() + top_.bytes() + blocks_.capacity() * sizeof(Block) +
            hash_.capacity() * (sizeof(std::pair<uint64_t, int32_t>) + 1);
   }
 
  private:
+  static constexpr int kBlockShift = 3 * kBlockDepths;
+  static constexpr uint64_t kBlockCells = uint64_t{1} << kBlockShift;  // 512: 8 words of bits
+
   // Bits set in x. Inline: the build targets baseline x86-64 (no POPCNT instruction), where
   // __builtin_popcountll is a call per lookup (into libgcc, through the PLT) to this same sequence.
   static int32_t PopCount(uint64_t x) {
@@ -98,10 +118,76 @@ class CellIndex {
     return static_cast<int32_t>((x * 0x0101010101010101ull) >> 56);
   }
 
-  bool dense_ = false;
-  std::vector<uint64_t> occupied_;  // bit (code & 63) of word (code >> 6): the cell is occupied
-  std::vector<int32_t> rank_;       // occupied cells in the words before
-  absl::flat_hash_map<uint64_t, int32_t> hash_;
+  // One bit per cell and a running count per 64 cells: a code's rank among the occupied cells.
+  struct RankedBits {
+    std::vector<uint64_t> occupied;  // bit (code & 63) of word (code >> 6): the cell is occupied
+    std::vector<int32_t> rank;       // occupied cells in the words before
+
+    void Build(const std::vector<uint64_t>& codes, uint64_t cells) {
+      const size_t words = static_cast<size_t>((cells + 63) / 64);
+      occupied.assign(words, 0);
+      for (uint64_t code : codes) occupied[code >> 6] |= uint64_t{1} << (code & 63);
+      rank.resize(words);
+      int32_t before = 0;
+      for (size_t w = 0; w < words; ++w) {
+        rank[w] = before;
+        before += PopCount(occupied[w]);
+      }
+    }
+    int32_t Find(uint64_t code) const {
+      const uint64_t word = code >> 6;
+      if (word >= occupied.size()) return -1;
+      const uint64_t bits = occupied[word];
+      const uint64_t bit = uint64_t{1} << (code & 63);
+      if ((bits & bit) == 0) return -1;
+      return rank[word] + PopCount(bits & (bit - 1));
+    }
+    size_t bytes() const {
+      return occupied.capacity() * sizeof(uint64_t) + rank.capacity() * sizeof(int32_t);
+    }
+  };
+
+  // The occupied cells of one block of kBlockCells: a lookup reads one block, and the 8 cells a
+  // correspondence search asks for mostly share it (a hash map's 8 lookups are 8 random accesses).
+  struct Block {
+    std::array<uint64_t, kBlockCells / 64> bits{};
+    std::array<uint16_t, kBlockCells / 64> before{};  // occupied cells in the block's words before
+    int32_t first = 0;                                // the node of the block's first occupied cell
+  };
+
+  // The blocked form when it is small enough (kMaxBlockedBytesPerNode); false leaves it empty.
+  bool TryBlocks(const std::vector<uint64_t>& codes, uint64_t cells) {
+    std::vector<uint64_t> tops;
+    for (uint64_t code : codes) {
+      if (tops.empty() || tops.back() != code >> kBlockShift) tops.push_back(code >> kBlockShift);
+    }
+    if (tops.size() * sizeof(Block) > kMaxBlockedBytesPerNode * codes.size()) return false;
+    top_.Build(tops, cells >> kBlockShift);
+    blocks_.resize(tops.size());
+    size_t b = 0;
+    for (size_t j = 0; j < codes.size(); ++j) {
+      const uint64_t top = codes[j] >> kBlockShift;
+      if (tops[b] != top) ++b;
+      Block& block = blocks_[b];
+      if (j == 0 || codes[j - 1] >> kBlockShift != top) block.first = static_cast<int32_t>(j);
+      const uint64_t low = codes[j] & (kBlockCells - 1);
+      block.bits[low >> 6] |= uint64_t{1} << (low & 63);
+    }
+    for (Block& block : blocks_) {
+      uint16_t before = 0;
+      for (size_t w = 0; w < block.bits.size(); ++w) {
+        block.before[w] = before;
+        before = static_cast<uint16_t>(before + PopCount(block.bits[w]));
+      }
+    }
+    return true;
+  }
+
+  Form form_ = Form::kDense;
+  RankedBits dense_;                             // kDense
+  RankedBits top_;                               // kBlocked: the blocks' cells, three depths up
+  std::vector<Block> blocks_;                    // kBlocked: by the rank of their cell in top_
+  absl::flat_hash_map<uint64_t, int32_t> hash_;  // kHashed
 };
 
 // The edge of a cell of `tree`'s level `depth` (2^depth cells across the cube), in metres.

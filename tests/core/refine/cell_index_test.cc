@@ -1,5 +1,6 @@
 // CellIndex: the refinement's Morton code -> node lookup gives the same answers in its dense
-// (rank bitset) and hashed forms, on real tree levels and at the edges of the code range.
+// (rank bitset), blocked (rank bitsets of the occupied 8^3-cell blocks) and hashed forms, on real
+// tree levels and at the edges of the code range.
 #include "core/refine/cell_index.h"
 
 #include <algorithm>
@@ -8,6 +9,7 @@
 #include <vector>
 
 #include "core/data/object_pairs.h"
+#include "core/synth/lidar_sequence.h"
 #include "core/tree/bh_tree.h"
 #include "core/tree/morton.h"
 #include "gtest/gtest.h"
@@ -60,9 +62,57 @@ TEST(CellIndexTest, EveryDepthOfAnObjectTreeFindsItsNodesDenseOrHashed) {
     ExpectIndexes(index, codes, depth);
   }
   EXPECT_EQ(dense, 7);
+  // Depths 7 and 8 of a 2,048-point object hold about one node per block: hashed.
   EXPECT_EQ(hashed, 2);
   EXPECT_FALSE(CellIndex(tree->level(8).morton, 8).dense());
   EXPECT_TRUE(CellIndex(tree->level(6).morton, 6).dense());
+}
+
+TEST(CellIndexTest, AScansDeepLevelsAreBlocked) {
+  LidarSequenceOptions options;
+  options.frame_count = 1;
+  auto sequence = LidarSequenceSimulator::Create(options);
+  ASSERT_TRUE(sequence.ok()) << sequence.status();
+  BarnesHutTreeOptions tree_options;
+  tree_options.max_depth = 9;  // the CLI's depth for scenes
+  tree_options.neighbor_max_depth = -1;
+  auto tree = BuildOctree(sequence->SimulateFrame(0).cloud, tree_options);
+  ASSERT_TRUE(tree.ok()) << tree.status();
+  for (int depth = 0; depth <= 9; ++depth) {
+    const std::vector<uint64_t>& codes = tree->level(depth).morton;
+    const CellIndex index(codes, depth);
+    SCOPED_TRACE(testing::Message() << "depth " << depth << ", " << codes.size() << " nodes");
+    // Depths 0-6 fit 2^18 cells; a street's surfaces fill its 8^3-cell blocks of depths 7-9 well
+    // enough for blocks of 88 bytes to cost less than a hash map.
+    EXPECT_EQ(index.form(), depth <= 6 ? CellIndex::Form::kDense : CellIndex::Form::kBlocked);
+    ExpectIndexes(index, codes, depth);
+  }
+}
+
+TEST(CellIndexTest, BlockedAndHashedFormsAnswerAlikeAtTheBlocksEdges) {
+  // Depth 9, every node in one of a few blocks, filling each block's first and last cells and
+  // its word boundaries (the ranks carried between words and between blocks).
+  std::vector<uint64_t> codes;
+  for (uint64_t block : {0ull, 1ull, 4095ull, 262143ull}) {
+    for (uint64_t low : {0ull, 1ull, 62ull, 63ull, 64ull, 127ull, 128ull, 300ull, 448ull, 511ull}) {
+      codes.push_back(block * 512 + low);
+    }
+  }
+  const CellIndex blocked(codes, 9);
+  EXPECT_EQ(blocked.form(), CellIndex::Form::kBlocked);
+  ExpectIndexes(blocked, codes, 9);
+  // One node a block costs 88 bytes a node there: hashed, the same answers.
+  std::vector<uint64_t> scattered;
+  for (uint64_t block = 0; block < 262144; block += 97) scattered.push_back(block * 512 + 17);
+  const CellIndex hashed(scattered, 9);
+  EXPECT_EQ(hashed.form(), CellIndex::Form::kHashed);
+  ExpectIndexes(hashed, scattered, 9);
+  EXPECT_LT(blocked.bytes(), hashed.bytes());
+  // Deeper than 9, the blocks' own index would pass 2^18 cells: hashed.
+  std::vector<uint64_t> deep;
+  for (uint64_t c = 0; c < 4096; ++c) deep.push_back((uint64_t{1} << 30) + c);
+  EXPECT_EQ(CellIndex(deep, 10).form(), CellIndex::Form::kHashed);
+  ExpectIndexes(CellIndex(deep, 10), deep, 10);
 }
 
 TEST(CellIndexTest, ADeepLevelWithAtMost64CellsANodeIsDense) {
@@ -89,7 +139,7 @@ TEST(CellIndexTest, FullAndEmptyLevels) {
   const CellIndex empty(std::vector<uint64_t>{}, 3);
   EXPECT_EQ(empty.Find(0), -1);
   EXPECT_EQ(empty.Find(511), -1);
-  // A sparse deep level is hashed and answers the same way.
+  // A sparse deep level (three nodes in three blocks) is hashed and answers the same way.
   const std::vector<uint64_t> sparse = {EncodeMorton<3>({1, 2, 3}), EncodeMorton<3>({500, 7, 9}),
                                         EncodeMorton<3>({511, 511, 511})};
   std::vector<uint64_t> sorted = sparse;
