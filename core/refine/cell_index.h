@@ -82,19 +82,32 @@ class CellIndex {
         return dense_.Find(code);
       case Form::kBlocked: {
         const int32_t b = top_.Find(code >> kBlockShift);
-        if (b < 0) return -1;
-        const Block& block = blocks_[static_cast<size_t>(b)];
-        const uint64_t low = code & (kBlockCells - 1);
-        const uint64_t bits = block.bits[low >> 6];
-        const uint64_t bit = uint64_t{1} << (low & 63);
-        if ((bits & bit) == 0) return -1;
-        return block.first + block.before[low >> 6] + PopCount(bits & (bit - 1));
+        return b < 0 ? -1 : FindInBlock(blocks_[static_cast<size_t>(b)], code);
       }
       case Form::kHashed:
         break;
     }
     const auto it = hash_.find(code);
     return it == hash_.end() ? -1 : it->second;
+  }
+
+  // Find for each of codes[0 .. n) into out: the blocked form reads the index of blocks once for
+  // a run of codes in one block (FindBlock's cells mostly are). A code of ~0 finds -1.
+  void FindAll(const uint64_t* codes, int n, int32_t* out) const {
+    if (form_ != Form::kBlocked) {
+      for (int i = 0; i < n; ++i) out[i] = Find(codes[i]);
+      return;
+    }
+    uint64_t last_top = ~uint64_t{0};
+    int32_t b = -1;
+    for (int i = 0; i < n; ++i) {
+      const uint64_t top = codes[i] >> kBlockShift;
+      if (top != last_top) {
+        last_top = top;
+        b = top_.Find(top);
+      }
+      out[i] = b < 0 ? -1 : FindInBlock(blocks_[static_cast<size_t>(b)], codes[i]);
+    }
   }
 
   Form form() const { return form_; }
@@ -154,6 +167,15 @@ class CellIndex {
     std::array<uint16_t, kBlockCells / 64> before{};  // occupied cells in the block's words before
     int32_t first = 0;                                // the node of the block's first occupied cell
   };
+
+  // The node at `code`, which lies in `block`, or -1.
+  static int32_t FindInBlock(const Block& block, uint64_t code) {
+    const uint64_t low = code & (kBlockCells - 1);
+    const uint64_t bits = block.bits[low >> 6];
+    const uint64_t bit = uint64_t{1} << (low & 63);
+    if ((bits & bit) == 0) return -1;
+    return block.first + block.before[low >> 6] + PopCount(bits & (bit - 1));
+  }
 
   // The blocked form when it is small enough (kMaxBlockedBytesPerNode); false leaves it empty.
   bool TryBlocks(const std::vector<uint64_t>& codes, uint64_t cells) {
@@ -231,27 +253,30 @@ inline BlockHome LocateBlockHome(const Octree& tree, int depth, const Eigen::Vec
 // cell edge of it. The correspondence searches of the refinement and of the noise polish.
 inline void FindBlock(const CellIndex& index, const std::array<uint32_t, 3>& home,
                       const std::array<int, 3>& side, int block, int64_t cells, int32_t* out) {
-  auto find = [&](int64_t x, int64_t y, int64_t z) -> int32_t {
-    if (x < 0 || y < 0 || z < 0 || x >= cells || y >= cells || z >= cells) return -1;
-    return index.Find(EncodeMorton<3>(
-        {static_cast<uint32_t>(x), static_cast<uint32_t>(y), static_cast<uint32_t>(z)}));
+  // The cells' codes (~0, which finds nothing, for one outside the level), then one FindAll.
+  auto code = [&](int64_t x, int64_t y, int64_t z) -> uint64_t {
+    if (x < 0 || y < 0 || z < 0 || x >= cells || y >= cells || z >= cells) return ~uint64_t{0};
+    return EncodeMorton<3>(
+        {static_cast<uint32_t>(x), static_cast<uint32_t>(y), static_cast<uint32_t>(z)});
   };
+  std::array<uint64_t, 27> codes;
   int slot = 0;
   if (block == 27) {
     for (int dz = -1; dz <= 1; ++dz) {
       for (int dy = -1; dy <= 1; ++dy) {
         for (int dx = -1; dx <= 1; ++dx) {
-          out[slot++] = find(int64_t{home[0]} + dx, int64_t{home[1]} + dy, int64_t{home[2]} + dz);
+          codes[slot++] = code(int64_t{home[0]} + dx, int64_t{home[1]} + dy, int64_t{home[2]} + dz);
         }
       }
     }
-    return;
+  } else {
+    for (int b = 0; b < 8; ++b) {
+      codes[slot++] = code(int64_t{home[0]} + ((b & 1) ? side[0] : 0),
+                           int64_t{home[1]} + ((b & 2) ? side[1] : 0),
+                           int64_t{home[2]} + ((b & 4) ? side[2] : 0));
+    }
   }
-  for (int b = 0; b < 8; ++b) {
-    out[slot++] =
-        find(int64_t{home[0]} + ((b & 1) ? side[0] : 0), int64_t{home[1]} + ((b & 2) ? side[1] : 0),
-             int64_t{home[2]} + ((b & 4) ? side[2] : 0));
-  }
+  index.FindAll(codes.data(), slot, out);
 }
 
 }  // namespace rpsr::core

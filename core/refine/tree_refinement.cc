@@ -198,14 +198,13 @@ NodeShape ShapeOf(const Octree& tree, int depth, int node, const ShapeRule& rule
 }
 
 // A node's regularised covariance from its shape (the shape's node may be an ancestor).
-RegularizedNode Regularize(const NodeShape& shape, double edge,
-                           const TreeRefinementOptions& options) {
+RegularizedNode Regularize(const NodeShape& shape, double edge, double covariance_epsilon) {
   RegularizedNode out;
   const double edge2 = edge * edge;
   out.iso = edge2;
   if (!shape.planar) return out;
   out.normal = shape.normal;
-  out.flat = edge2 * (1.0 - options.covariance_epsilon);
+  out.flat = edge2 * (1.0 - covariance_epsilon);
   out.planar = true;
   return out;
 }
@@ -256,9 +255,11 @@ struct TargetDepth {
   }
 };
 
-// The source's side of one depth: the chosen nodes with their regularised covariances and prior
-// weights. On the source's own cells it is shared like the target's; re-binned cells are new at
-// every round.
+// The source's side of one depth: the chosen nodes with their prior weights, and their
+// regularised covariances on first use. On the source's own cells it is shared like the target's;
+// re-binned cells are new at every round. Only matched nodes read a shape, and a scan's depths hold
+// 15-25% without a partner, so computing them eagerly spent eigen-decompositions nobody read (the
+// decompositions were a fifth of a scan's refinement). One thread at a time, like its cache.
 struct SourceDepth {
   int depth = 0;
   double covariance_epsilon = 0.0;
@@ -267,8 +268,32 @@ struct SourceDepth {
   int max_nodes = 0;
   std::vector<int32_t> nodes;
   std::vector<Eigen::Vector3d> mean;
-  std::vector<RegularizedNode> regularized;
   std::vector<double> prior;  // inverse density, count or 1 (see WeightScheme)
+
+  // Entry k's regularised covariance, computed now if it has not been (the same value either way).
+  const RegularizedNode& Regularized(size_t k) const {
+    if (!shaped[k]) {
+      // Nodes too sparse for a shape read their ancestor's, and siblings are adjacent in the
+      // Morton order: the last shape computed is reused for them (at an object's finest depth most
+      // nodes hold one or two points).
+      const std::pair<int, int> shape_node = ShapeNodeOf(*tree, depth, nodes[k], rule.min_count);
+      if (shape_node != last_shape_node) {
+        last_shape = ShapeAt(*tree, shape_node, rule.line_normals_from_planes, ancestors);
+        last_shape_node = shape_node;
+      }
+      regularized[k] = Regularize(last_shape, edge, covariance_epsilon);
+      shaped[k] = 1;
+    }
+    return regularized[k];
+  }
+
+  const Octree* tree = nullptr;  // must outlive the side
+  double edge = 0.0;             // the source tree's cell edge at `depth`
+  mutable std::vector<RegularizedNode> regularized;
+  mutable std::vector<uint8_t> shaped;
+  mutable std::pair<int, int> last_shape_node = {-2, -2};
+  mutable NodeShape last_shape;
+  mutable AncestorPlanes ancestors;
 };
 
 // One stage's view: both sides, and per source entry the target nodes of the cell block last
@@ -285,7 +310,7 @@ struct DepthData {
   std::vector<int32_t> block_nodes;
 };
 
-// Fills a new (empty) side.
+// Fills a new (empty) side; its shapes come on first use (SourceDepth::Regularized).
 void PrepareSourceDepth(const Octree& source, int depth, const TreeRefinementOptions& options,
                         SourceDepth& side) {
   side.depth = depth;
@@ -293,7 +318,8 @@ void PrepareSourceDepth(const Octree& source, int depth, const TreeRefinementOpt
   side.rule = ShapeRuleOf(options);
   side.weights = options.weights;
   side.max_nodes = options.max_source_nodes_per_depth;
-  const double edge_source = CellEdge(source, depth);
+  side.tree = &source;
+  side.edge = CellEdge(source, depth);
   const Octree::Level& s = source.level(depth);
   const size_t n = s.size();
   const size_t used = std::min(n, static_cast<size_t>(options.max_source_nodes_per_depth));
@@ -303,23 +329,11 @@ void PrepareSourceDepth(const Octree& source, int depth, const TreeRefinementOpt
     side.nodes.push_back(static_cast<int32_t>(k * n / used));
   }
   side.mean.reserve(used);
-  side.regularized.reserve(used);
   side.prior.reserve(used);
-  // Nodes too sparse for a shape read their ancestor's, and siblings are adjacent in the Morton
-  // order: the last shape computed is reused for them (at an object's finest depth most nodes hold
-  // one or two points, and the eigen-decompositions were a sixth of a refinement).
-  std::pair<int, int> last_shape_node = {-2, -2};
-  NodeShape last_shape;
-  AncestorPlanes ancestors;
+  side.regularized.resize(used);
+  side.shaped.assign(used, 0);
   for (int32_t node : side.nodes) {
     side.mean.push_back(s.center_of_mass[node].cast<double>());
-    const std::pair<int, int> shape_node =
-        ShapeNodeOf(source, depth, node, options.min_count_for_covariance);
-    if (shape_node != last_shape_node) {
-      last_shape = ShapeAt(source, shape_node, side.rule.line_normals_from_planes, ancestors);
-      last_shape_node = shape_node;
-    }
-    side.regularized.push_back(Regularize(last_shape, edge_source, options));
     switch (options.weights) {
       case WeightScheme::kInverseDensity:
         side.prior.push_back(s.inverse_density[node]);
@@ -521,9 +535,11 @@ struct Correspondence {
   int32_t j = 0;                                    // target node
   Eigen::Vector3d moved = Eigen::Vector3d::Zero();  // T * mu_s
   Eigen::Vector3d target_mean = Eigen::Vector3d::Zero();
-  Eigen::Matrix3d information = Eigen::Matrix3d::Zero();  // (C_t + R C_s R^T)^-1
-  double weight = 0.0;                                    // normalised prior * robust weight
-  double robust = 0.0;                                    // robust weight alone
+  // (C_t + R C_s R^T)^-1, set by Linearize's second pass before anything reads it. Left
+  // uninitialised: the emplace_back that zeroed the whole struct was 1.7% of a scan's profile.
+  Eigen::Matrix3d information;
+  double weight = 0.0;  // normalised prior * robust weight
+  double robust = 0.0;  // robust weight alone
 };
 
 // The nearest target CoM to `q` (the moved CoM of source entry k) among the target cells of the
@@ -700,7 +716,7 @@ Linearization Linearize(const Octree& source, const Octree& target, DepthData& d
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
   for (Correspondence& c : corr) {
     const NodeShape& tn = td.Shape(target, c.j, scratch_shape, ancestors);
-    const RegularizedNode& sn = sd.regularized[c.k];
+    const RegularizedNode& sn = sd.Regularized(static_cast<size_t>(c.k));
     const Eigen::Vector3d m = R * sn.normal;  // the source's normal in the target frame
     Eigen::Matrix3d combined = (target_iso + sn.iso) * Eigen::Matrix3d::Identity();
     if (tn.planar) combined.noalias() -= target_flat * tn.normal * tn.normal.transpose();

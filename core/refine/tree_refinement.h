@@ -324,8 +324,9 @@ struct DepthStage {
   double last_update_rotation_rad = 0.0;
   double last_update_translation = 0.0;
   double seconds = 0.0;  // the whole stage, preparation included
-  // Re-binning, regularising the source's nodes, indexing the target's level (near 0 where a
-  // TreeRefinementCache already held the last two).
+  // Re-binning the source, listing its nodes, indexing the target's level (near 0 where a
+  // TreeRefinementCache already held the last two). Both sides' shapes are computed on first use,
+  // inside the iterations' time.
   double prepare_seconds = 0.0;
   // The target's side came from a PreparedRefinementTarget (not built by this call or its cache).
   bool target_side_prepared = false;
