@@ -8,11 +8,19 @@
 #     FILTER='BM_RegisterObjects/mode:1$' ROUNDS=8 MINTIME=0.5 tests/bench/alternate_binaries.sh
 #
 # Build OLD from the commit before a change (e.g. git stash; ninja -C build X; cp; git stash pop).
+# COLUMN=cpu compares the benchmark's CPU time instead of its wall time: on a VM whose neighbours
+# take the core away (wall time well above CPU time in the output), the wall time mostly
+# measures them.
 set -euo pipefail
 : "${OLD:?set OLD to the old binary}" "${NEW:?set NEW to the new binary}"
 filter=${FILTER:-.}
 rounds=${ROUNDS:-8}
 min_time=${MINTIME:-0.5}
+case "${COLUMN:-wall}" in
+  wall) fields='$1, $2, $3' ;;
+  cpu) fields='$1, $4, $5' ;;
+  *) echo "COLUMN must be wall or cpu" >&2; exit 2 ;;
+esac
 times=$(mktemp)
 trap 'rm -f "$times"' EXIT
 for _ in $(seq "$rounds"); do
@@ -21,7 +29,7 @@ for _ in $(seq "$rounds"); do
     [ "$side" = new ] && binary=$NEW
     env -u OPENBLAS_CORETYPE OMP_WAIT_POLICY=PASSIVE "$binary" --benchmark_filter="$filter" \
       --benchmark_min_time="$min_time" 2>/dev/null |
-      awk -v side="$side" '/^BM_/ {print side, $1, $2, $3}' >>"$times"
+      awk -v side="$side" "/^BM_/ {print side, $fields}" >>"$times"
   done
 done
 python3 - "$times" <<'PY'
