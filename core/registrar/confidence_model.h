@@ -61,6 +61,7 @@ enum ConfidenceFeature {
   kFeatureSurfaceScatterCells,     // the source's scatter about the target's planes (0: unmeasured)
   kFeatureNoisePolished,           // 1 when the noise polish ran (tree_refinement.h)
   kFeatureSymmetricTwinMargin,     // how much better the answer fits than its best symmetric twin
+  kFeatureTurnContrast,  // how many more nodes the answer turned by 45 deg leaves unmatched
   kNumConfidenceFeatures,
 };
 
