@@ -285,16 +285,25 @@ TEST(ShippedCalibrationTest, AGearATurnOffReadsANegativeTwinMargin) {
 // of different streets): every answer counts as a failure, and the shipped confidence keeps them
 // low on average (held-out, `rpsr calibrate --evaluate --object_pairs 0 --lidar_pairs 8
 // --unrelated_pairs 32`: mean 0.014, tests/bench/results/confidence_heldout_unrelated.csv).
-TEST(ShippedCalibrationTest, UnrelatedPairsAreFailuresAndReadLowConfidence) {
+// Samples of scan pairs 5 frames apart (trees to depth 8) and of unrelated pairs of each kind, no
+// object pairs, all three modes.
+absl::StatusOr<std::vector<CalibrationSample>> ScanAndUnrelatedSamples(uint64_t seed,
+                                                                       int lidar_pairs,
+                                                                       int unrelated_per_kind) {
   CalibrationSetOptions options;
-  options.seed = 2024;
+  options.seed = seed;
   options.object_pairs_per_setting = 0;
-  options.lidar_pairs_per_offset = 1;
+  options.lidar_pairs_per_offset = lidar_pairs;
   options.lidar_frame_offsets = {5};
   options.lidar_tree_depth = 8;
-  options.unrelated_pairs_per_kind = 2;
+  options.unrelated_pairs_per_kind = unrelated_per_kind;
   options.threads = 2;
-  auto samples = CollectCalibrationSamples(testing_util::SharedRegistrar(), options);
+  return CollectCalibrationSamples(testing_util::SharedRegistrar(), options);
+}
+
+TEST(ShippedCalibrationTest, UnrelatedPairsAreFailuresAndReadLowConfidence) {
+  auto samples =
+      ScanAndUnrelatedSamples(/*seed=*/2024, /*lidar_pairs=*/1, /*unrelated_per_kind=*/2);
   ASSERT_TRUE(samples.ok()) << samples.status();
   ASSERT_EQ(samples->size(), (1u + 2u * 3u) * 3u);
   double sum = 0.0;
@@ -316,20 +325,13 @@ TEST(ShippedCalibrationTest, UnrelatedPairsAreFailuresAndReadLowConfidence) {
   EXPECT_LT(sum / unrelated, 0.2);
 }
 
-// The turn contrast (confidence_model.h) tells a fit that single out its pose from one that any
+// The turn contrast (confidence_model.h) tells a fit that singles out its pose from one that any
 // pose would give: right answers on scans lose most of their partners when turned by 45 degrees
 // (held out: 0.64-0.88), two volumes of random points hardly any (-0.01-0.15), and the shipped
 // calibration reads both (volumes' confidence up to 0.35 held out, 0.57 before the feature).
 TEST(ShippedCalibrationTest, RandomVolumesReadALowTurnContrastAndRightScansAHighOne) {
-  CalibrationSetOptions options;
-  options.seed = 2025;
-  options.object_pairs_per_setting = 0;
-  options.lidar_pairs_per_offset = 2;
-  options.lidar_frame_offsets = {5};
-  options.lidar_tree_depth = 8;
-  options.unrelated_pairs_per_kind = 3;
-  options.threads = 2;
-  auto samples = CollectCalibrationSamples(testing_util::SharedRegistrar(), options);
+  auto samples =
+      ScanAndUnrelatedSamples(/*seed=*/2025, /*lidar_pairs=*/2, /*unrelated_per_kind=*/3);
   ASSERT_TRUE(samples.ok()) << samples.status();
   int volumes = 0, right_scans = 0;
   double volume_contrast = -1.0, volume_confidence = 0.0, scan_contrast = 1.0;
