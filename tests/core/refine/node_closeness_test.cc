@@ -4,7 +4,10 @@
 #include "core/refine/node_closeness.h"
 
 #include <cmath>
+#include <limits>
+#include <vector>
 
+#include "core/data/object_pairs.h"
 #include "core/data/transform_convention.h"
 #include "gtest/gtest.h"
 #include "tests/core/refine/refinement_test_geometry.h"
@@ -88,6 +91,48 @@ TEST(NodeClosenessTest, FarNodeFractionsCountTheNodesBeyondTheThresholdPerPose) 
   EXPECT_LT(FarNodeFractions(tree, tree, {Eigen::Isometry3d::Identity()}, 0, 1.5).front(), 0.0);
   EXPECT_LT(FarNodeFractions(tree, tree, {Eigen::Isometry3d::Identity()}, kDepth + 1, 1.5).front(),
             0.0);
+}
+
+// FarNodeFractions against a search of every target node: its search of the 27 coarser cells
+// around a node, ended at the first partner near enough, gives the same fractions, for an object
+// pair under turns of 0-60 degrees and shifts (the turn contrast's and the twin margin's poses),
+// at the depth they read and one finer.
+TEST(NodeClosenessTest, FarNodeFractionsEqualASearchOfEveryNode) {
+  auto pair = MakeObjectPair(testing_util::UnseenPairs(DisturbanceKind::kGaussianNoise, 1), 5);
+  ASSERT_TRUE(pair.ok()) << pair.status();
+  const Octree source = RefinementTree(pair->source, kDepth);
+  const Octree target = RefinementTree(pair->target, kDepth);
+  std::vector<Eigen::Isometry3d> poses;
+  for (double deg : {0.0, 5.0, 15.0, 30.0, 45.0, 60.0}) {
+    for (int axis = 0; axis < 3; ++axis) {
+      Eigen::Isometry3d turn = Eigen::Isometry3d::Identity();
+      turn.linear() = Eigen::AngleAxisd(deg * M_PI / 180.0, Eigen::Vector3d::Unit(axis)).matrix();
+      turn.translation() = Eigen::Vector3d(0.01 * axis, -0.02, 0.03 * deg / 60.0);
+      poses.push_back(turn * pair->T_target_source);
+    }
+  }
+  for (int depth : {kDepth - 1, kDepth}) {
+    for (double far_cells : {0.5, 1.0, 1.9}) {
+      const std::vector<double> got = FarNodeFractions(source, target, poses, depth, far_cells);
+      const Octree::Level& s = source.level(depth);
+      const Octree::Level& t = target.level(depth);
+      const double far = far_cells * EdgeOf(target, depth);
+      ASSERT_LE(s.size(), NodeClosenessOptions{}.max_source_nodes);  // every node is sampled
+      for (size_t p = 0; p < poses.size(); ++p) {
+        size_t beyond = 0;
+        for (size_t i = 0; i < s.size(); ++i) {
+          const Eigen::Vector3d q = poses[p] * s.center_of_mass[i].cast<double>();
+          double nearest2 = std::numeric_limits<double>::infinity();
+          for (size_t j = 0; j < t.size(); ++j) {
+            nearest2 = std::min(nearest2, (t.center_of_mass[j].cast<double>() - q).squaredNorm());
+          }
+          beyond += std::sqrt(nearest2) > far;
+        }
+        EXPECT_EQ(got[p], static_cast<double>(beyond) / static_cast<double>(s.size()))
+            << "depth " << depth << ", far " << far_cells << " cells, pose " << p;
+      }
+    }
+  }
 }
 
 TEST(NodeClosenessTest, TheSampleIsAnEvenStrideOverTheSourceNodes) {
