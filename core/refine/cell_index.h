@@ -12,7 +12,7 @@
 // at most 2^18 cells (an octree's depths 0-6) costs at most 48 KB whatever its nodes. So an
 // object's depths 3-6 are dense by the size clause (~55 KB in all, more than the hash map on a
 // sparse object's depth 6), and so are a scan's coarse depths. A scan's deep, sparse levels (its
-// depth 9 has ~130M cells for ~50k nodes) are blocked: the same ranks, kept only for the blocks
+// depth 9 has ~134M cells for ~7,600 nodes) are blocked: the same ranks, kept only for the blocks
 // of 8^3 cells that hold a node, found through a dense index of the blocks three depths up. Its
 // memory is the hash map's or less, and a search's 8 neighbouring cells mostly lie in one block
 // (one cache line of bits), where a hash map's 8 lookups were 8 random accesses (its probes were
@@ -45,7 +45,8 @@ class CellIndex {
   static constexpr uint64_t kSmallLevelCells = uint64_t{1} << 18;  // depth 6 of an octree
   // The blocked form: blocks of 8^3 cells (a cell of the level three depths up), taken when that
   // coarser level fits kSmallLevelCells (depths 7-9) and the blocks cost at most this many bytes
-  // a node (a hash map's ~15-23; a scan's depth 9 holds ~10-30 nodes a block, ~3-9 bytes a node).
+  // a node (a hash map's ~15-23; a simulated scan's depths 7-9 hold 13-19 nodes a block, 5-7 bytes
+  // a node, as CellIndexTest.AScansDeepLevelsAreBlocked prints).
   static constexpr int kBlockDepths = 3;
   static constexpr uint64_t kMaxBlockedBytesPerNode = 24;
 
@@ -187,20 +188,21 @@ class CellIndex {
     top_.Build(tops, cells >> kBlockShift);
     blocks_.resize(tops.size());
     size_t b = 0;
-    for (size_t j = 0; j < codes.size(); ++j) {
-      const uint64_t top = codes[j] >> kBlockShift;
-      if (tops[b] != top) ++b;
-      Block& block = blocks_[b];
-      if (j == 0 || codes[j - 1] >> kBlockShift != top) block.first = static_cast<int32_t>(j);
-      const uint64_t low = codes[j] & (kBlockCells - 1);
-      block.bits[low >> 6] |= uint64_t{1} << (low & 63);
+    for (uint64_t code : codes) {
+      if (tops[b] != code >> kBlockShift) ++b;
+      const uint64_t low = code & (kBlockCells - 1);
+      blocks_[b].bits[low >> 6] |= uint64_t{1} << (low & 63);
     }
+    // The ranks: nodes before each block (its first node) and before each of its words.
+    int32_t nodes_before = 0;
     for (Block& block : blocks_) {
+      block.first = nodes_before;
       uint16_t before = 0;
       for (size_t w = 0; w < block.bits.size(); ++w) {
         block.before[w] = before;
         before = static_cast<uint16_t>(before + PopCount(block.bits[w]));
       }
+      nodes_before += before;
     }
     return true;
   }

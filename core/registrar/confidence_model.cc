@@ -63,7 +63,8 @@ int FeatureIndex(absl::string_view name) {
 // twice the cost). 0 where nothing can be measured.
 double TurnContrast(const Octree& source, const Octree& target, const Eigen::Isometry3d& answer) {
   constexpr double kTurnDeg = 45.0;
-  constexpr double kFarCells = 1.9;  // SelfSymmetryOptions::far_cells
+  // The twin margin's distance (1.9 cells one depth above the finest): a partner that near.
+  const double far_cells = SelfSymmetryOptions{}.far_cells;
   const Eigen::Vector3d pivot = answer * source.level(0).center_of_mass[0].cast<double>();
   std::vector<Eigen::Isometry3d> poses = {answer};
   for (int axis = 0; axis < 3; ++axis) {
@@ -80,7 +81,7 @@ double TurnContrast(const Octree& source, const Octree& target, const Eigen::Iso
   NodeClosenessOptions sample;
   sample.max_source_nodes = 512;
   const std::vector<double> far =
-      FarNodeFractions(source, target, poses, SymmetryDepth(source, target), kFarCells, sample);
+      FarNodeFractions(source, target, poses, SymmetryDepth(source, target), far_cells, sample);
   if (far.empty() || far.front() < 0.0) return 0.0;
   double turned = 0.0;
   for (size_t k = 1; k < far.size(); ++k) {

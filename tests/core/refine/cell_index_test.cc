@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <cstdio>
 #include <random>
 #include <vector>
 
@@ -86,6 +87,14 @@ TEST(CellIndexTest, AScansDeepLevelsAreBlocked) {
     // enough for blocks of 88 bytes to cost less than a hash map.
     EXPECT_EQ(index.form(), depth <= 6 ? CellIndex::Form::kDense : CellIndex::Form::kBlocked);
     ExpectIndexes(index, codes, depth);
+    if (depth >= 7) {
+      size_t blocks = 0;
+      for (size_t j = 0; j < codes.size(); ++j)
+        blocks += j == 0 || codes[j] >> 9 != codes[j - 1] >> 9;
+      std::printf("depth %d: %zu nodes in %zu blocks of 8^3 cells, %.1f a block; index %zu bytes\n",
+                  depth, codes.size(), blocks, static_cast<double>(codes.size()) / blocks,
+                  index.bytes());
+    }
   }
 }
 
