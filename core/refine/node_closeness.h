@@ -29,7 +29,8 @@ struct NodeClosenessOptions {
   // Fixed at 2 by that search.
   static constexpr double kCapCells = 2.0;
   // An even stride over the source's nodes of the depth, at most this many (bounds the cost on
-  // a scan's ~50k depth-9 nodes; 2,048 put the mean within ~1% on objects).
+  // a scan's depth 9, ~7,600 nodes in a simulated street scan; 2,048 put the mean within ~1% on
+  // objects).
   size_t max_source_nodes = 2048;
 };
 
