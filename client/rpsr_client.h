@@ -149,6 +149,9 @@ struct RegisterOptions {
   // Experimental: refine the answer turned by the target's near-symmetry too (proto
   // RegisterOptions.symmetric_starts).
   bool symmetric_starts = false;
+  // Refine the answer turned about the target's round axis too, when not confident (proto
+  // RegisterOptions.round_axis_start).
+  bool round_axis_start = true;
   // The refinement's coarse depths on the target's cells (proto RegisterOptions; false: the
   // source tree's own cells).
   bool rebin_coarse_depths = true;

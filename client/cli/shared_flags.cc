@@ -53,6 +53,11 @@ ABSL_FLAG(
     "eval, register, odometry, bench, net+refine on scene-scale trees: when the answer is still "
     "below 0.9 confidence, search a start (turns about z, assumed up; shifts of whole "
     "cells) and refine from it too");
+ABSL_FLAG(bool, round_axis_start, true,
+          "eval, register, odometry, bench, net+refine on object-scale trees: when the answer is "
+          "below 0.9 confidence and the target is round about a principal axis (a cup with a "
+          "tab), also refine the answer turned about that axis to where it leaves the fewest "
+          "nodes without a partner, and keep the clearly better answer");
 ABSL_FLAG(bool, symmetric_starts, false,
           "eval, register, odometry, bench, net+refine on object-scale trees (experimental): "
           "when the target has near-symmetries (a gear's teeth), also refine the answer turned "
@@ -104,6 +109,7 @@ void ApplyRegistrationFlags(core::RegistrationOptions& options) {
   options.also_refine_from_initial = absl::GetFlag(FLAGS_refine_from_initial);
   options.search_scene_start = absl::GetFlag(FLAGS_search_scene_start);
   options.try_symmetric_starts = absl::GetFlag(FLAGS_symmetric_starts);
+  options.search_round_axis_start = absl::GetFlag(FLAGS_round_axis_start);
   options.refinement.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
   options.refinement.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);
   options.refinement.noise_polish = absl::GetFlag(FLAGS_noise_polish);

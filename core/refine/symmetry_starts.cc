@@ -1,6 +1,7 @@
 #include "core/refine/symmetry_starts.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <complex>
 
@@ -59,6 +60,31 @@ int StrongestFold(const Octree& tree, const Eigen::Vector3d& centre, const Eigen
   return best;
 }
 
+// The target's principal axes through its centre of mass, and which are round: the two other
+// principal variances within options.min_round_ratio of each other (an n-fold symmetry, or a
+// body of revolution, needs that).
+struct PrincipalAxes {
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d axes = Eigen::Matrix3d::Identity();  // columns, variances ascending
+  std::array<bool, 3> round = {false, false, false};
+};
+
+PrincipalAxes PrincipalAxesOf(const Octree& target, const SelfSymmetryOptions& options) {
+  PrincipalAxes out;
+  out.centre = target.level(0).center_of_mass[0].cast<double>();
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(
+      target.Covariance(0, 0).cast<double>());
+  out.axes = solver.eigenvectors();
+  const Eigen::Vector3d variances = solver.eigenvalues();  // ascending
+  for (int axis = 0; axis < 3; ++axis) {
+    const double a = variances[(axis + 1) % 3];
+    const double b = variances[(axis + 2) % 3];
+    out.round[axis] =
+        std::max(a, b) > 0.0 && std::min(a, b) >= options.min_round_ratio * std::max(a, b);
+  }
+  return out;
+}
+
 }  // namespace
 
 int SymmetryDepth(const Octree& source, const Octree& target) {
@@ -70,22 +96,17 @@ std::vector<SelfSymmetry> FindSelfSymmetries(const Octree& target,
   std::vector<SelfSymmetry> found;
   if (target.max_depth() < 2 || target.num_points() == 0) return found;
   const int depth = SymmetryDepth(target, target);
-  const Eigen::Vector3d centre = target.level(0).center_of_mass[0].cast<double>();
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(
-      target.Covariance(0, 0).cast<double>());
-  const Eigen::Vector3d variances = solver.eigenvalues();  // ascending
+  const PrincipalAxes principal = PrincipalAxesOf(target, options);
+  const Eigen::Vector3d& centre = principal.centre;
   auto self_distance = [&](int axis, double angle_rad) {
-    return MeanNodeDistanceCells(
-        target, target, TurnAbout(centre, solver.eigenvectors().col(axis), angle_rad), depth);
+    return MeanNodeDistanceCells(target, target,
+                                 TurnAbout(centre, principal.axes.col(axis), angle_rad), depth);
   };
   for (int axis = 0; axis < 3; ++axis) {
-    const double a = variances[(axis + 1) % 3];
-    const double b = variances[(axis + 2) % 3];
-    const bool round =
-        std::max(a, b) > 0.0 && std::min(a, b) >= options.min_round_ratio * std::max(a, b);
     const int folds =
-        round ? StrongestFold(target, centre, solver.eigenvectors().col(axis), options.max_folds)
-              : 0;
+        principal.round[axis]
+            ? StrongestFold(target, centre, principal.axes.col(axis), options.max_folds)
+            : 0;
     if (folds == 0) continue;
     // The turn by 1/n must bring the target near itself, and half of it must not: a smooth round
     // object turned by a small angle also lies near itself, but nearer still at half the angle.
@@ -95,11 +116,28 @@ std::vector<SelfSymmetry> FindSelfSymmetries(const Octree& target,
     if (self_distance(axis, M_PI / folds) < tooth + options.min_dip_cells) continue;
     for (int k = 1; k < folds; ++k) {
       const double angle = 2.0 * M_PI * k / folds;
-      found.push_back({TurnAbout(centre, solver.eigenvectors().col(axis), angle), axis,
-                       angle * 180.0 / M_PI, tooth});
+      found.push_back(
+          {TurnAbout(centre, principal.axes.col(axis), angle), axis, angle * 180.0 / M_PI, tooth});
     }
   }
   return found;
+}
+
+std::vector<SelfSymmetry> TurnsAboutRoundAxes(const Octree& target, double step_deg,
+                                              const SelfSymmetryOptions& options) {
+  std::vector<SelfSymmetry> turns;
+  if (target.max_depth() < 2 || target.num_points() == 0 || !(step_deg > 0.0)) return turns;
+  const PrincipalAxes principal = PrincipalAxesOf(target, options);
+  const int steps = static_cast<int>(std::lround(360.0 / step_deg));
+  for (int axis = 0; axis < 3; ++axis) {
+    if (!principal.round[axis]) continue;
+    for (int k = 1; k < steps; ++k) {
+      const double angle = 2.0 * M_PI * k / steps;
+      turns.push_back({TurnAbout(principal.centre, principal.axes.col(axis), angle), axis,
+                       angle * 180.0 / M_PI, -1.0});
+    }
+  }
+  return turns;
 }
 
 namespace {

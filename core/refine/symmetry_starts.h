@@ -69,6 +69,14 @@ struct SelfSymmetry {
 std::vector<SelfSymmetry> FindSelfSymmetries(const Octree& target,
                                              const SelfSymmetryOptions& options = {});
 
+// Turns by k * step_deg (k = 1 .. 360 / step_deg - 1) about each of the target's round principal
+// axes (its two other principal variances within min_round_ratio), as SelfSymmetry entries with
+// self_distance_cells -1 (they are not checked to be near-symmetries): candidates for an answer
+// turned off about such an axis, where the feature that tells the turns apart (a cup's tab) is too
+// small for a local step to climb to (RegistrationOptions::search_round_axis_start).
+std::vector<SelfSymmetry> TurnsAboutRoundAxes(const Octree& target, double step_deg,
+                                              const SelfSymmetryOptions& options = {});
+
 struct SymmetricTwin {
   Eigen::Isometry3d T_target_source = Eigen::Isometry3d::Identity();
   double far_fraction = 0.0;         // of the twin

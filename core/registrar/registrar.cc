@@ -423,6 +423,19 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
       try_start(searched->T_target_source, "searched");
     }
   }
+  // The round-axis start (RegistrationOptions::search_round_axis_start). `symmetries` is empty
+  // for scene-scale pairs and for targets whose turns are near-symmetries (twins fit alike, and
+  // the twin margin speaks for them).
+  if (net_refine && options.search_round_axis_start && best.valid &&
+      result.confidence < kConfidentEnough && symmetries.empty() &&
+      !IsDeepPair(source, target, refinement)) {
+    constexpr double kRoundAxisStepDeg = 15.0;
+    const std::vector<SelfSymmetry> turns = TurnsAboutRoundAxes(target, kRoundAxisStepDeg);
+    if (std::optional<SymmetricTwin> turned =
+            BestSymmetricTwin(source, target, best.T_target_source, turns)) {
+      try_start(turned->T_target_source, "round_axis");
+    }
+  }
   // The symmetric start (RegistrationOptions::try_symmetric_starts): object-scale trees whose
   // target has near-symmetries, whatever the confidence (a tooth off reads confident). The twin
   // is kept when, refined, it still leaves clearly fewer source nodes without a partner and does

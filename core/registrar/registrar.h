@@ -91,6 +91,14 @@ struct RegistrationOptions {
   // confidence), and offline every rule that fixed many gears also turned right answers:
   // tests/bench/notes/refinement-notes.md, *Gears a tooth off*.
   bool try_symmetric_starts = false;
+  // net+refine on object-scale trees whose answer is still not confident and whose target has a
+  // round principal axis but no near-symmetry: the answer turned about that axis by every
+  // multiple of 15 degrees is scored by the nodes it leaves without a partner
+  // (TurnsAboutRoundAxes, BestSymmetricTwin), and the best, when it leaves clearly fewer, is
+  // refined as a further start and settled by the usual rule. A cup (a cylinder with a small
+  // tab) whose network start is ~20 degrees off about its body ends there: the tab's few nodes
+  // give a local step nothing to climb, while the turned pose that meets them fits better.
+  bool search_round_axis_start = true;
   // With initial_T_target_source given: when the answer's geometry is degenerate (num_degenerate
   // > 0), its motion from the initial guess is kept only off the degenerate directions; along
   // them the pose is the guess's (HoldDegenerateDirections, core/refine/degenerate_hold.h), and

@@ -176,6 +176,17 @@ TEST(ProtoConvertTest, SymmetricStartsAreOffUnlessTurnedOn) {
   EXPECT_TRUE(options->try_symmetric_starts);
 }
 
+TEST(ProtoConvertTest, RoundAxisStartIsOnUnlessTurnedOff) {
+  auto options = OptionsFromProto({});
+  ASSERT_TRUE(options.ok());
+  EXPECT_TRUE(options->search_round_axis_start);
+  v1::RegisterOptions proto;
+  proto.set_round_axis_start(false);
+  options = OptionsFromProto(proto);
+  ASSERT_TRUE(options.ok());
+  EXPECT_FALSE(options->search_round_axis_start);
+}
+
 TEST(ProtoConvertTest, ResultCarriesEverythingTheRegistrarSays) {
   core::RegistrationResult result;
   result.valid = false;

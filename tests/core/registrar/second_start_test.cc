@@ -2,12 +2,16 @@
 // refinement from the network's estimate or the one from the initial guess, the latter only when
 // the first is not confident and the latter is clearly better; on consecutive simulated scans,
 // where the shipped object network is off its training distribution, the answer is right.
+#include <cmath>
+#include <cstdio>
 #include <vector>
 
 #include "core/data/object_pairs.h"
 #include "core/data/registration_metrics.h"
 #include "core/data/training_pairs.h"
+#include "core/data/transform_convention.h"
 #include "core/refine/node_closeness.h"
+#include "core/refine/symmetry_starts.h"
 #include "core/registrar/registrar.h"
 #include "core/synth/lidar_sequence.h"
 #include "core/synth/seeded_random.h"
@@ -160,6 +164,93 @@ TEST(RegistrarSecondStartTest, SearchedStartRescuesMotionsOfTenMetres) {
     EXPECT_EQ(b->starts, a->starts + 1) << "pair " << index;
     EXPECT_NE(a->start, "searched") << "pair " << index;
   }
+}
+
+// A mug whose handle is small (3% of its 1,024 points): a cylinder of radius 0.5 and height 1.6
+// about z with a bottom, and a half ring of radius 0.12 outside its wall. Without the handle it
+// would be round about z; the handle alone tells its turns about z apart.
+PointCloud SmallHandledMug(uint64_t seed) {
+  SeededRandom random(seed);
+  PointCloud cloud;
+  while (cloud.points.size() < 1024) {
+    const double part = random.UniformUnit();
+    const double theta = random.Uniform(0.0, 2.0 * M_PI);
+    if (part < 0.77) {  // the wall
+      cloud.points.emplace_back(0.5 * std::cos(theta), 0.5 * std::sin(theta),
+                                random.Uniform(-0.8, 0.8));
+    } else if (part < 0.97) {  // the bottom
+      const double r = 0.5 * std::sqrt(random.UniformUnit());
+      cloud.points.emplace_back(r * std::cos(theta), r * std::sin(theta), -0.8);
+    } else {  // the handle: a tube of radius 0.03 along a half ring in the x-z plane
+      const double along = random.Uniform(-0.5 * M_PI, 0.5 * M_PI);
+      const double ring = 0.12 + 0.03 * std::cos(theta);
+      cloud.points.emplace_back(0.5 + ring * std::cos(along), 0.03 * std::sin(theta),
+                                ring * std::sin(along));
+    }
+  }
+  return cloud;
+}
+
+TEST(SymmetryTurnsTest, TurnsAboutAMugsBodyAndNoneForAFlatBox) {
+  const Octree mug = TreeOf(SmallHandledMug(1), 6);
+  const std::vector<SelfSymmetry> turns = TurnsAboutRoundAxes(mug, 15.0);
+  // 15, 30, ... 345 degrees about its one round principal axis, the body's (z). (A mug about as
+  // tall as wide would be round about every axis: its three variances alike.)
+  ASSERT_EQ(turns.size(), 23u);
+  const Eigen::Vector3d centre = mug.level(0).center_of_mass[0].cast<double>();
+  int about_z = 0;
+  for (size_t k = 0; k < turns.size(); ++k) {
+    EXPECT_NEAR(turns[k].angle_deg, 15.0 * static_cast<double>(k % 23 + 1), 1e-9);
+    EXPECT_LT((turns[k].S * centre - centre).norm(), 1e-9);
+    const Eigen::AngleAxisd turn(turns[k].S.linear());
+    about_z += std::abs(turn.axis().z()) > 0.99 ? 1 : 0;
+  }
+  EXPECT_EQ(about_z, 23);
+  // A box of three different sides has no round axis.
+  PointCloud box;
+  SeededRandom random(3);
+  for (int i = 0; i < 1024; ++i) {
+    box.points.emplace_back(random.Uniform(-1.0, 1.0), random.Uniform(-0.5, 0.5),
+                            random.Uniform(-0.2, 0.2));
+  }
+  EXPECT_TRUE(TurnsAboutRoundAxes(TreeOf(box, 6), 15.0).empty());
+}
+
+// net+refine's round-axis start (RegistrationOptions::search_round_axis_start) on mugs with a
+// small handle at the protocol's poses: where it settles, the answer is within 2 degrees and was
+// beyond 5 without it; no answer within 1 degree without it is worse with it.
+TEST(RegistrarSecondStartTest, RoundAxisStartTurnsAMugBackOntoItsHandle) {
+  int settled = 0;
+  for (uint64_t i = 0; i < 16; ++i) {
+    SeededRandom random(DeriveSeed(26, i));
+    Eigen::Vector3d angles;
+    for (int a = 0; a < 3; ++a) angles[a] = random.Uniform(0.0, 45.0 * M_PI / 180.0);
+    Eigen::Isometry3d truth = Eigen::Isometry3d::Identity();
+    truth.linear() = RotationFromEulerXyz(angles);
+    for (int a = 0; a < 3; ++a) truth.translation()[a] = random.Uniform(-0.5, 0.5);
+    const PointCloud source_cloud = SmallHandledMug(DeriveSeed(27, 2 * i));
+    PointCloud target_cloud = SmallHandledMug(DeriveSeed(27, 2 * i + 1));
+    for (Eigen::Vector3f& p : target_cloud.points) p = (truth * p.cast<double>()).cast<float>();
+    const Octree source = TreeOf(source_cloud, 6);
+    const Octree target = TreeOf(target_cloud, 6);
+    RegistrationOptions without;
+    without.search_round_axis_start = false;
+    auto a = SharedRegistrar().Register(source, target, without);
+    auto b = SharedRegistrar().Register(source, target);
+    ASSERT_TRUE(a.ok() && b.ok());
+    const double error_without = ErrorOf(a->T_target_source, truth).rotation_deg;
+    const double error_with = ErrorOf(b->T_target_source, truth).rotation_deg;
+    if (error_without < 1.0) {
+      EXPECT_LT(error_with, 1.0) << "pair " << i;
+    }
+    if (b->start != "round_axis") continue;
+    ++settled;
+    EXPECT_LT(error_with, 2.0) << "pair " << i;
+    EXPECT_GT(error_without, 5.0) << "pair " << i;
+    EXPECT_EQ(b->starts, a->starts + 1) << "pair " << i;
+  }
+  std::printf("mugs turned back by the round-axis start: %d of 16\n", settled);
+  EXPECT_GE(settled, 1);
 }
 
 }  // namespace
