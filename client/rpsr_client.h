@@ -212,7 +212,8 @@ struct RegistrationResult {
   Eigen::Isometry3d net_T_target_source = Eigen::Isometry3d::Identity();
   double net_score_peak = 0.0;
   std::string mode;
-  // Where the returned pose's refinement started ("network", "initial", "searched") and how many
+  // Where the returned pose's refinement started ("network", "initial", "searched", "round_axis",
+  // "symmetric") and how many
   // starts the server refined for this pair (proto RegistrationResult.start, .starts).
   std::string start;
   int starts = 0;

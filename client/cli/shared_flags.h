@@ -53,8 +53,7 @@ std::optional<core::ObjectSplit> ParseObjectSplitFlag(const std::string& name,
 
 // The registration flags the subcommands share (--passes, --refine_from_initial,
 // --search_scene_start, --symmetric_starts, --round_axis_start, --rebin_coarse_depths,
-// --joint_finest_stage,
-// --noise_polish, --coarse_wide_search, --line_normals_from_planes,
+// --joint_finest_stage, --noise_polish, --coarse_wide_search, --line_normals_from_planes,
 // --hold_degenerate_at_initial) set on `options`; its mode and initial guess stay the caller's.
 void ApplyRegistrationFlags(core::RegistrationOptions& options);
 

@@ -12,7 +12,8 @@
 // and the turn by half of it does not. SymmetricTwinMargin measures how much better an answer
 // explains the clouds than its best twin: the confidence reads it (confidence_model.h).
 // BestSymmetricTwin picks the twin to refine for the experimental symmetric start
-// (RegistrationOptions::try_symmetric_starts).
+// (RegistrationOptions::try_symmetric_starts), and among TurnsAboutRoundAxes the turn the
+// round-axis start refines (RegistrationOptions::search_round_axis_start).
 #ifndef RPSR_CORE_REFINE_SYMMETRY_STARTS_H_
 #define RPSR_CORE_REFINE_SYMMETRY_STARTS_H_
 
@@ -69,11 +70,11 @@ struct SelfSymmetry {
 std::vector<SelfSymmetry> FindSelfSymmetries(const Octree& target,
                                              const SelfSymmetryOptions& options = {});
 
-// Turns by k * step_deg (k = 1 .. 360 / step_deg - 1) about each of the target's round principal
-// axes (its two other principal variances within min_round_ratio), as SelfSymmetry entries with
-// self_distance_cells -1 (they are not checked to be near-symmetries): candidates for an answer
-// turned off about such an axis, where the feature that tells the turns apart (a cup's tab) is too
-// small for a local step to climb to (RegistrationOptions::search_round_axis_start).
+// Turns by k * 360 / n (n = round(360 / step_deg), k = 1 .. n - 1) about each of the target's round
+// principal axes (its two other principal variances within min_round_ratio), as SelfSymmetry
+// entries with self_distance_cells -1 (they are not checked to be near-symmetries): candidates for
+// an answer turned off about such an axis, where the feature that tells the turns apart (a cup's
+// tab) is too small for a local step to climb to (RegistrationOptions::search_round_axis_start).
 std::vector<SelfSymmetry> TurnsAboutRoundAxes(const Octree& target, double step_deg,
                                               const SelfSymmetryOptions& options = {});
 

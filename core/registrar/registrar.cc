@@ -310,9 +310,9 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
       RefineWithFallback(source, target, from, refinement, cache);
   double confidence_seconds = 0.0;
   // The target's near-symmetries, object-scale pairs only: the confidence's twin margin reads
-  // them (and the experimental symmetric start). A target without a round principal axis costs
-  // one 3x3 eigen-decomposition; a round one its harmonics and one node-distance measure. A
-  // prepared target found them once.
+  // them, the round-axis start runs only without them (and the experimental symmetric start). A
+  // target without a round principal axis costs one 3x3 eigen-decomposition; a round one its
+  // harmonics and one node-distance measure. A prepared target found them once.
   const auto symmetry_start = Clock::now();
   std::vector<SelfSymmetry> found_here;
   const std::vector<SelfSymmetry>* symmetries_of_target = &found_here;
@@ -423,9 +423,9 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
       try_start(searched->T_target_source, "searched");
     }
   }
-  // The round-axis start (RegistrationOptions::search_round_axis_start). `symmetries` is empty
-  // for scene-scale pairs and for targets whose turns are near-symmetries (twins fit alike, and
-  // the twin margin speaks for them).
+  // The round-axis start (RegistrationOptions::search_round_axis_start). Skipped where the target
+  // has near-symmetries (`symmetries` non-empty: twins fit alike, and the twin margin speaks for
+  // them); `symmetries` is also empty for scene-scale pairs, hence the depth test.
   if (net_refine && options.search_round_axis_start && best.valid &&
       result.confidence < kConfidentEnough && symmetries.empty() &&
       !IsDeepPair(source, target, refinement)) {
