@@ -213,8 +213,8 @@ struct RegistrationResult {
   double net_score_peak = 0.0;
   std::string mode;
   // Where the returned pose's refinement started ("network", "initial", "searched", "round_axis",
-  // "symmetric") and how many
-  // starts the server refined for this pair (proto RegistrationResult.start, .starts).
+  // "symmetric") and how many starts the server refined for this pair (proto
+  // RegistrationResult.start, .starts).
   std::string start;
   int starts = 0;
   ServerTimings timings;

@@ -159,10 +159,10 @@ struct RegistrationResult {
   // Where the returned pose's refinement started: "network" (net+refine's first start; mode net's
   // single evaluation), "initial" (the caller's guess or identity: mode refine's only start,
   // net+refine's second), "searched" (net+refine's third on scene-scale trees,
-  // RegistrationOptions:: search_scene_start), "round_axis" (its third on object-scale trees,
-  // search_round_axis_start) or "symmetric" (try_symmetric_starts); and how many starts were
-  // refined for this pair (1-3; 4 with the experimental symmetric start; 0 when the pipeline
-  // stopped before refining: the network's output not finite).
+  // RegistrationOptions::search_scene_start), "round_axis" (its third on object-scale trees
+  // without near-symmetries, search_round_axis_start) or "symmetric" (its third on those with,
+  // try_symmetric_starts); and how many starts were refined for this pair (1-3; 0 when the
+  // pipeline stopped before refining: the network's output not finite).
   std::string start = "network";
   int starts = 0;
   RegistrationTimings timings;
