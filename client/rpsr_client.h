@@ -152,6 +152,9 @@ struct RegisterOptions {
   // Refine the answer turned about the target's round axis too, when not confident (proto
   // RegisterOptions.round_axis_start).
   bool round_axis_start = true;
+  // Check a scene-scale answer that puts the two sensors together against a search over the
+  // structure off the ground (proto RegisterOptions.sensor_aligned_check).
+  bool sensor_aligned_check = true;
   // The refinement's coarse depths on the target's cells (proto RegisterOptions; false: the
   // source tree's own cells).
   bool rebin_coarse_depths = true;
@@ -212,8 +215,8 @@ struct RegistrationResult {
   Eigen::Isometry3d net_T_target_source = Eigen::Isometry3d::Identity();
   double net_score_peak = 0.0;
   std::string mode;
-  // Where the returned pose's refinement started ("network", "initial", "searched", "round_axis",
-  // "symmetric") and how many starts the server refined for this pair (proto
+  // Where the returned pose's refinement started ("network", "initial", "searched", "structure",
+  // "round_axis", "symmetric") and how many starts the server refined for this pair (proto
   // RegistrationResult.start, .starts).
   std::string start;
   int starts = 0;

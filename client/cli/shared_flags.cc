@@ -58,6 +58,11 @@ ABSL_FLAG(bool, round_axis_start, true,
           "below 0.9 confidence and the target is round about a principal axis (a cup with a "
           "tab), also refine the answer turned about that axis to where it leaves the fewest "
           "nodes without a partner, and keep the clearly better answer");
+ABSL_FLAG(bool, sensor_aligned_check, true,
+          "eval, register, odometry, bench, net+refine on scene-scale trees: when the answer puts "
+          "the two sensors within a search cell of each other and both clouds have a ground, "
+          "also refine from a search scored on the structure off the ground and keep it when it "
+          "leaves clearly fewer structure nodes without a partner");
 ABSL_FLAG(bool, symmetric_starts, false,
           "eval, register, odometry, bench, net+refine on object-scale trees (experimental): "
           "when the target has near-symmetries (a gear's teeth), also refine the answer turned "
@@ -110,6 +115,7 @@ void ApplyRegistrationFlags(core::RegistrationOptions& options) {
   options.search_scene_start = absl::GetFlag(FLAGS_search_scene_start);
   options.try_symmetric_starts = absl::GetFlag(FLAGS_symmetric_starts);
   options.search_round_axis_start = absl::GetFlag(FLAGS_round_axis_start);
+  options.check_sensor_aligned_answers = absl::GetFlag(FLAGS_sensor_aligned_check);
   options.refinement.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
   options.refinement.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);
   options.refinement.noise_polish = absl::GetFlag(FLAGS_noise_polish);

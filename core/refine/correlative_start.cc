@@ -18,10 +18,13 @@ namespace {
 // millions of them.
 class Occupancy {
  public:
-  Occupancy(const Octree& target, int depth) : side_(int64_t{1} << depth) {
+  Occupancy(const Octree& target, int depth, const std::vector<uint8_t>* marked)
+      : side_(int64_t{1} << depth) {
     bits_.assign(static_cast<size_t>((side_ * side_ * side_ + 63) / 64), 0);
-    for (uint64_t code : target.level(depth).morton) {
-      const std::array<uint32_t, 3> cell = DecodeMorton<3>(code);
+    const std::vector<uint64_t>& codes = target.level(depth).morton;
+    for (size_t node = 0; node < codes.size(); ++node) {
+      if (marked != nullptr && !(*marked)[node]) continue;
+      const std::array<uint32_t, 3> cell = DecodeMorton<3>(codes[node]);
       const int64_t i = Index(cell[0], cell[1], cell[2]);
       bits_[static_cast<size_t>(i >> 6)] |= uint64_t{1} << (i & 63);
     }
@@ -40,6 +43,12 @@ class Occupancy {
 
 }  // namespace
 
+int CorrelativeSearchDepth(const Octree& source, const Octree& target,
+                           const CorrelativeSearchOptions& options) {
+  const int deepest = std::min(source.max_depth(), target.max_depth());
+  return options.depth < 0 ? std::clamp(deepest - 3, 1, kMaxCorrelativeDepth) : options.depth;
+}
+
 absl::StatusOr<CorrelativeStart> FindCorrelativeStart(const Octree& source, const Octree& target,
                                                       const Eigen::Isometry3d& initial,
                                                       const CorrelativeSearchOptions& options) {
@@ -51,8 +60,7 @@ absl::StatusOr<CorrelativeStart> FindCorrelativeStart(const Octree& source, cons
     return absl::InvalidArgumentError("FindCorrelativeStart: the initial guess is not finite");
   }
   const int deepest = std::min(source.max_depth(), target.max_depth());
-  const int depth =
-      options.depth < 0 ? std::clamp(deepest - 3, 1, kMaxCorrelativeDepth) : options.depth;
+  const int depth = CorrelativeSearchDepth(source, target, options);
   if (depth < 1 || depth > deepest || depth > kMaxCorrelativeDepth || options.max_shift_cells < 0 ||
       !(options.max_yaw_deg >= 0) || options.max_source_nodes <= 0) {
     return absl::InvalidArgumentError(
@@ -60,19 +68,35 @@ absl::StatusOr<CorrelativeStart> FindCorrelativeStart(const Octree& source, cons
                      deepest, ") and at most ", kMaxCorrelativeDepth,
                      "; max_shift_cells and max_yaw_deg non-negative, max_source_nodes positive"));
   }
-  const Occupancy occupied(target, depth);
+  if ((options.source_nodes != nullptr &&
+       options.source_nodes->size() != source.level(depth).size()) ||
+      (options.target_nodes != nullptr &&
+       options.target_nodes->size() != target.level(depth).size())) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "FindCorrelativeStart: the node masks must be sized as the trees' depth ", depth));
+  }
+  const Occupancy occupied(target, depth, options.target_nodes);
   const double edge = CellEdge(target, depth);
   const Eigen::Vector3d corner = target.center() - Eigen::Vector3d::Constant(target.half_length());
 
   // The scored source nodes, moved by the initial guess, about the pivot (their weighted CoM).
-  const Octree::Level& level = source.level(std::min(source.max_depth(), depth));
-  const size_t n = level.size();
+  const Octree::Level& level = source.level(depth);
+  std::vector<uint32_t> scored;  // the marked source nodes (all when unmarked)
+  for (size_t node = 0; node < level.size(); ++node) {
+    if (options.source_nodes == nullptr || (*options.source_nodes)[node]) {
+      scored.push_back(static_cast<uint32_t>(node));
+    }
+  }
+  if (scored.empty()) {
+    return absl::InvalidArgumentError("FindCorrelativeStart: no source node is marked");
+  }
+  const size_t n = scored.size();
   const size_t used = std::min(n, static_cast<size_t>(options.max_source_nodes));
   std::vector<Eigen::Vector3d> moved;
   moved.reserve(used);
   Eigen::Vector3d pivot = Eigen::Vector3d::Zero();
   for (size_t k = 0; k < used; ++k) {
-    moved.push_back(initial * level.center_of_mass[k * n / used].cast<double>());
+    moved.push_back(initial * level.center_of_mass[scored[k * n / used]].cast<double>());
     pivot += moved.back();
   }
   pivot /= static_cast<double>(used);

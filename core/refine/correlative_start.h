@@ -15,6 +15,9 @@
 #ifndef RPSR_CORE_REFINE_CORRELATIVE_START_H_
 #define RPSR_CORE_REFINE_CORRELATIVE_START_H_
 
+#include <cstdint>
+#include <vector>
+
 #include "Eigen/Geometry"
 #include "absl/status/statusor.h"
 #include "core/tree/bh_tree.h"
@@ -37,7 +40,17 @@ struct CorrelativeSearchOptions {
   int max_shift_cells = 6;
   // Source nodes scored at most (an even stride over the Morton order).
   int max_source_nodes = 1500;
+  // When set (each sized as its tree's level at the search's depth, CorrelativeSearchDepth): only
+  // the source nodes marked 1 are scored and only the target nodes marked 1 occupy their cells.
+  // The registrar's sensor-aligned check passes the structure off a scan's ground
+  // (dominant_plane.h), whose cells are occupied wherever the scan reached.
+  const std::vector<uint8_t>* source_nodes = nullptr;
+  const std::vector<uint8_t>* target_nodes = nullptr;
 };
+
+// The occupancy depth a search with these options uses (options.depth, or its default).
+int CorrelativeSearchDepth(const Octree& source, const Octree& target,
+                           const CorrelativeSearchOptions& options = {});
 
 struct CorrelativeStart {
   Eigen::Isometry3d T_target_source = Eigen::Isometry3d::Identity();

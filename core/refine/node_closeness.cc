@@ -72,12 +72,25 @@ double VisitNodeDistances(const Octree& source, const Octree& target,
     if (!dense.empty()) return dense[static_cast<size_t>(code)];
     return index.Find(code);  // -1 is Octree::kEmpty
   };
-  const size_t n = s.size();
+  // The source nodes that take part (all, or those marked), sampled by an even stride over the
+  // Morton order.
+  std::vector<uint32_t> kept;
+  if (options.source_nodes != nullptr) {
+    if (options.source_nodes->size() != s.size()) return 0.0;
+    for (size_t i = 0; i < s.size(); ++i) {
+      if ((*options.source_nodes)[i]) kept.push_back(static_cast<uint32_t>(i));
+    }
+    if (kept.empty()) return 0.0;
+  }
+  const std::vector<uint8_t>* partners = options.target_nodes;
+  if (partners != nullptr && partners->size() != t.size()) return 0.0;
+  const size_t n = options.source_nodes != nullptr ? kept.size() : s.size();
   const size_t used = std::min(n, options.max_source_nodes);
   for (size_t pose = 0; pose < poses.size(); ++pose) {
     const Eigen::Isometry3d& T_target_source = poses[pose];
     for (size_t k = 0; k < used; ++k) {
-      const size_t node = k * n / used;  // even stride over the Morton order
+      const size_t stride = k * n / used;  // even stride over the Morton order
+      const size_t node = kept.empty() ? stride : kept[stride];
       const Eigen::Vector3d q = T_target_source * s.center_of_mass[node].cast<double>();
       if (!q.allFinite()) {  // a non-finite pose: no partner (and no undefined integer cast)
         visit(pose, cap);
@@ -105,6 +118,7 @@ double VisitNodeDistances(const Octree& source, const Octree& target,
         for (int octant = 0; octant < Octree::kChildren; ++octant) {
           const int32_t j = t.labels[parent * Octree::kChildren + static_cast<size_t>(octant)];
           if (j == Octree::kEmpty) continue;
+          if (partners != nullptr && !(*partners)[static_cast<size_t>(j)]) continue;
           best2 = std::min(best2, (t.center_of_mass[j].cast<double>() - q).squaredNorm());
         }
         if (best2 <= stop2) break;

@@ -16,6 +16,7 @@
 #define RPSR_CORE_REFINE_NODE_CLOSENESS_H_
 
 #include <cstddef>
+#include <cstdint>
 #include <vector>
 
 #include "Eigen/Geometry"
@@ -32,6 +33,11 @@ struct NodeClosenessOptions {
   // a scan's depth 9, ~7,600 nodes in a simulated street scan; 2,048 put the mean within ~1% on
   // objects).
   size_t max_source_nodes = 2048;
+  // When set (sized as the level of `depth`): only the source nodes marked 1 are sampled and only
+  // the target nodes marked 1 are partners (the structure off a scan's ground,
+  // dominant_plane.h). Null: every node.
+  const std::vector<uint8_t>* source_nodes = nullptr;
+  const std::vector<uint8_t>* target_nodes = nullptr;
 };
 
 // Mean over the source's nodes of `depth` (an even sample) of min(distance from T_target_source *

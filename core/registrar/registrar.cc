@@ -16,8 +16,10 @@
 #include "core/data/registration_metrics.h"
 #include "core/io/file_bytes.h"
 #include "core/net/rpsr_net.h"
+#include "core/refine/cell_index.h"
 #include "core/refine/correlative_start.h"
 #include "core/refine/degenerate_hold.h"
+#include "core/refine/dominant_plane.h"
 #include "core/refine/node_closeness.h"
 #include "core/refine/symmetry_starts.h"
 #include "core/registrar/confidence_model.h"
@@ -87,6 +89,14 @@ bool Closer(double later_cells, double so_far_cells) {
   return later_cells >= 0.0 && so_far_cells >= 0.0 &&
          later_cells < (1.0 - kCloserBy) * so_far_cells;
 }
+
+// The sensor-aligned check's margin: a searched answer replaces a sensor-aligned one when it
+// leaves this much less of the source's structure off the ground without a target partner within
+// a finest cell (OffPlaneFarFractions). Held-out LiDAR pairs, pair seed 5003: slides to the
+// sensor-aligned pose leave 0.10-0.39 more than the true pose (10 such answers among 512 pairs 5
+// and 10 frames apart, pair seeds 3, 1003, 5003, 7003); on 185 pairs 1-2 frames apart, where the
+// check runs on right answers, the searched start ends on them (at most 0.002 fewer).
+constexpr double kStructureFarDrop = 0.05;
 
 // A first answer at least this confident (a calibrated probability of being within 1 degree and
 // 1% of the extent) is kept without trying the initial guess as a second start.
@@ -421,6 +431,52 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
     absl::StatusOr<CorrelativeStart> searched = FindCorrelativeStart(source, target, initial);
     if (searched.ok() && (searched->score > searched->initial_score || !refined_from_initial)) {
       try_start(searched->T_target_source, "searched");
+    }
+  }
+  // The sensor-aligned check (RegistrationOptions::check_sensor_aligned_answers): a scene-scale
+  // answer that puts the two sensors within a search cell of each other, where the ground's
+  // rings and density line up whatever the scene did, is compared with the best start a search
+  // over the structure off the ground finds, and replaced when that one, refined, leaves clearly
+  // fewer structure nodes without a partner. Judged by that structure alone: by fitness the
+  // sensor-aligned pose wins.
+  if (net_refine && options.check_sensor_aligned_answers && best.valid &&
+      IsDeepPair(source, target, refinement)) {
+    CorrelativeSearchOptions search;
+    const int search_depth = CorrelativeSearchDepth(source, target, search);
+    const double aligned_within = CellEdge(target, search_depth);
+    const Eigen::Vector3d source_centre = source.level(0).center_of_mass[0].cast<double>();
+    if (best.T_target_source.translation().norm() < aligned_within) {
+      const DominantPlane source_plane = FindDominantPlane(source, finest_depth);
+      const DominantPlane target_plane = FindDominantPlane(target, finest_depth);
+      if (source_plane.found && target_plane.found) {
+        const std::vector<uint8_t> source_off = source_plane.OffPlaneNodes(source, search_depth);
+        const std::vector<uint8_t> target_off = target_plane.OffPlaneNodes(target, search_depth);
+        search.source_nodes = &source_off;
+        search.target_nodes = &target_off;
+        absl::StatusOr<CorrelativeStart> searched =
+            FindCorrelativeStart(source, target, initial, search);
+        // A candidate within a search cell of the answer would be refined back onto it (every
+        // one of 185 scan pairs 1-2 frames apart, where the check runs on right answers).
+        const bool near_answer =
+            searched.ok() &&
+            ErrorOf(searched->T_target_source, best.T_target_source).rotation_deg < 2.0 &&
+            (searched->T_target_source * source_centre - best.T_target_source * source_centre)
+                    .norm() < aligned_within;
+        if (searched.ok() && !near_answer) {
+          absl::StatusOr<TreeRefinementResult> r =
+              RefineWithFallback(source, target, searched->T_target_source, refinement, cache);
+          ++result.starts;
+          if (r.ok() && r->valid) {
+            const std::vector<double> far = OffPlaneFarFractions(
+                source, target, {best.T_target_source, r->T_target_source}, finest_depth, 1.0);
+            if (far[0] >= 0.0 && far[1] >= 0.0 && far[1] <= far[0] - kStructureFarDrop) {
+              settle(*r, searched->T_target_source, result);
+              result.start = "structure";
+              best = *std::move(r);
+            }
+          }
+        }
+      }
     }
   }
   // The round-axis start (RegistrationOptions::search_round_axis_start). Skipped where the target

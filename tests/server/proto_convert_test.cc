@@ -187,6 +187,17 @@ TEST(ProtoConvertTest, RoundAxisStartIsOnUnlessTurnedOff) {
   EXPECT_FALSE(options->search_round_axis_start);
 }
 
+TEST(ProtoConvertTest, SensorAlignedCheckIsOnUnlessTurnedOff) {
+  auto options = OptionsFromProto({});
+  ASSERT_TRUE(options.ok());
+  EXPECT_TRUE(options->check_sensor_aligned_answers);
+  v1::RegisterOptions proto;
+  proto.set_sensor_aligned_check(false);
+  options = OptionsFromProto(proto);
+  ASSERT_TRUE(options.ok());
+  EXPECT_FALSE(options->check_sensor_aligned_answers);
+}
+
 TEST(ProtoConvertTest, ResultCarriesEverythingTheRegistrarSays) {
   core::RegistrationResult result;
   result.valid = false;

@@ -166,6 +166,45 @@ TEST(RegistrarSecondStartTest, SearchedStartRescuesMotionsOfTenMetres) {
   }
 }
 
+// Held-out scan pairs of a parking lot 5 frames apart (pair seed 5003's draw): without the
+// sensor-aligned check net+refine ends at the identity translation, 7.7 m along the lot, with
+// confidence 0.99 (the ground's rings line up there); with it the search over the structure off
+// the ground finds the true motion.
+TEST(RegistrarSecondStartTest, SensorAlignedCheckFindsTheMotionAlongAParkingLot) {
+  LidarStreamOptions stream;
+  stream.frame_offset = 5;
+  stream.pairs_per_sequence = 8;
+  stream.stream_seed = DeriveSeed(5003, 1005);
+  const RegistrationPairGenerator pairs = MakeLidarPairStream(stream);
+  for (int index : {26, 27}) {
+    auto pair = pairs(index);
+    ASSERT_TRUE(pair.ok()) << pair.status();
+    ASSERT_GT(pair->T_target_source.translation().norm(), 5.0) << "a motion of several metres";
+    const Octree source = TreeOf(pair->source, 9);
+    const Octree target = TreeOf(pair->target, 9);
+    RegistrationOptions without;
+    without.check_sensor_aligned_answers = false;
+    auto a = SharedRegistrar().Register(source, target, without);
+    auto b = SharedRegistrar().Register(source, target);
+    ASSERT_TRUE(a.ok() && b.ok());
+    const PairError ea = ErrorOf(a->T_target_source, pair->T_target_source);
+    const PairError eb = ErrorOf(b->T_target_source, pair->T_target_source);
+    EXPECT_GT(ea.translation, 5.0) << "pair " << index << " no longer slides; pick another";
+    EXPECT_LT(a->T_target_source.translation().norm(), 1.0) << "pair " << index;
+    EXPECT_LT(eb.rotation_deg, 1.0) << "pair " << index;
+    EXPECT_LT(eb.translation, 0.3) << "pair " << index;
+    EXPECT_TRUE(b->valid) << "pair " << index << ": " << b->failure_reason;
+    EXPECT_EQ(b->start, "structure") << "pair " << index;
+    EXPECT_EQ(b->starts, a->starts + 1) << "pair " << index;
+    // Mode refine has no further starts.
+    RegistrationOptions refine;
+    refine.mode = RegistrationMode::kRefine;
+    auto c = SharedRegistrar().Register(source, target, refine);
+    ASSERT_TRUE(c.ok());
+    EXPECT_NE(c->start, "structure");
+  }
+}
+
 // A mug whose handle is small (3% of its 1,024 points): a cylinder of radius 0.5 and height 1.6
 // about z with a bottom, and a half ring of radius 0.12 outside its wall. Without the handle it
 // would be round about z; the handle alone tells its turns about z apart.
