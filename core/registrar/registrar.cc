@@ -92,10 +92,10 @@ bool Closer(double later_cells, double so_far_cells) {
 
 // The sensor-aligned check's margin: a searched answer replaces a sensor-aligned one when it
 // leaves this much less of the source's structure off the ground without a target partner within
-// a finest cell (OffPlaneFarFractions). Held-out LiDAR pairs, pair seed 5003: slides to the
-// sensor-aligned pose leave 0.10-0.39 more than the true pose (10 such answers among 512 pairs 5
-// and 10 frames apart, pair seeds 3, 1003, 5003, 7003); on 185 pairs 1-2 frames apart, where the
-// check runs on right answers, the searched start ends on them (at most 0.002 fewer).
+// a finest cell (OffPlaneFarFractions). Held-out LiDAR pairs 5 and 10 frames apart (pair seeds
+// 3, 1003, 5003, 7003; 512 pairs): the 10 slides to within 1.9 m of the sensor-aligned pose leave
+// 0.10-0.39 more than the searched start refined to the truth; on 185 pairs 1-2 frames apart,
+// where the check runs on right answers, the searched start ends on them (at most 0.002 fewer).
 constexpr double kStructureFarDrop = 0.05;
 
 // A first answer at least this confident (a calibrated probability of being within 1 degree and

@@ -109,7 +109,7 @@ struct RegistrationOptions {
   // be in their sensors' frames (as scans are) for the trigger to mean that; elsewhere it only
   // costs the search. Held-out LiDAR pairs (`rpsr calibrate --evaluate --object_pairs 0
   // --lidar_pairs 64 --pair_seed S`, S = 3, 1003, 5003, 7003), net+refine within (1 deg, 1%):
-  // 5 frames apart 253 -> 255 of 256, 10 frames apart 241 -> 250, confident failures 8 -> 1; no
+  // 5 frames apart 253 -> 255 of 256, 10 frames apart 241 -> 250, confident failures 10 -> 1; no
   // answer lost. Where it runs and the search lands near the answer it costs the search (~1-2 ms);
   // where it refines a further start, that refinement too.
   bool check_sensor_aligned_answers = true;
