@@ -4,7 +4,9 @@
 // (network, refinement, confidence) as counters. The goal for net+refine: at most 10 ms
 // for objects and 25 ms for LiDAR scans. The *SmallModel rows run the same object pairs through
 // the embedded objects-small model (core/models/objects-small: a quarter of the default's
-// convolution FLOPs) and report an error when it is not embedded.
+// convolution FLOPs) and report an error when it is not embedded. The *SensorAlignedSlide and
+// *SlowMotion rows time net+refine with and without the sensor-aligned check on held-out pairs
+// where it runs.
 //
 //   OMP_WAIT_POLICY=PASSIVE build/tests/bench/registrar_bench --benchmark_counters_tabular=true
 #include <cstdlib>
@@ -15,10 +17,12 @@
 
 #include "benchmark/benchmark.h"
 #include "core/data/object_pairs.h"
+#include "core/data/training_pairs.h"
 #include "core/net/rpsr_net.h"
 #include "core/registrar/embedded_models.h"
 #include "core/registrar/registrar.h"
 #include "core/synth/lidar_sequence.h"
+#include "core/synth/seeded_random.h"
 #include "tests/bench/bench_clouds.h"
 #include "tests/bench/blas_benchmark_main.h"
 
@@ -84,14 +88,47 @@ const TreePairs& LidarTrees() {
   return *pairs;
 }
 
+// Pairs of the held-out LiDAR stream (pair seed `pair_seed`, `frame_offset` frames apart, the
+// streams of `rpsr calibrate --evaluate`), full resolution, trees to depth 9.
+TreePairs HeldOutLidarTrees(uint64_t pair_seed, int frame_offset, const std::vector<int>& indices) {
+  LidarStreamOptions stream;
+  stream.frame_offset = frame_offset;
+  stream.pairs_per_sequence = 8;
+  stream.stream_seed = DeriveSeed(pair_seed, 1000 + static_cast<uint64_t>(frame_offset));
+  const RegistrationPairGenerator pairs = MakeLidarPairStream(stream);
+  std::vector<PointCloud> clouds;
+  for (int index : indices) {
+    RegistrationPair pair = bench::OrDie(pairs(static_cast<uint64_t>(index)), "LiDAR pair");
+    clouds.push_back(std::move(pair.source));
+    clouds.push_back(std::move(pair.target));
+  }
+  return TreePairs{bench::TreesOf(clouds, ToDepth(9))};
+}
+
+// Two parking-lot pairs 5 frames apart (7 m) whose answer, without the sensor-aligned check,
+// slides to the identity translation at confidence 0.99: the check searches and refines a
+// further start (RegistrationOptions::check_sensor_aligned_answers).
+const TreePairs& SensorAlignedSlideTrees() {
+  static const TreePairs* pairs = new TreePairs{HeldOutLidarTrees(5003, 5, {26, 27})};
+  return *pairs;
+}
+
+// Pairs 1 frame apart (under 1.5 m), right answers within a search cell of the identity: the check
+// classifies both trees and searches, and its candidate lands near the answer (no refinement).
+const TreePairs& SlowMotionLidarTrees() {
+  static const TreePairs* pairs = new TreePairs{HeldOutLidarTrees(5003, 1, {56, 57, 58, 60})};
+  return *pairs;
+}
+
 // `prepared`: each target prepared once beforehand (Registrar::PrepareTarget), as a caller that
 // registers many sources against one reference would; the preparation is not timed.
 // `refinement`: the refinement's options (the *FinestAlone and *CoarseOneCell rows turn one of its
 // choices off to measure what it costs).
 void RunRegister(benchmark::State& state, const TreePairs& trees, bool prepared = false,
                  const Registrar& registrar = SharedRegistrar(),
-                 const TreeRefinementOptions& refinement = {}) {
+                 const TreeRefinementOptions& refinement = {}, bool sensor_aligned_check = true) {
   RegistrationOptions options;
+  options.check_sensor_aligned_answers = sensor_aligned_check;
   options.mode = static_cast<RegistrationMode>(state.range(0));
   options.refinement = refinement;
   std::vector<std::shared_ptr<const PreparedTarget>> targets;
@@ -292,6 +329,25 @@ BENCHMARK(BM_RegisterLidarCoarseOneCell)
     ->ArgName("mode")
     ->Arg(static_cast<int>(RegistrationMode::kNetRefine))
     ->Arg(static_cast<int>(RegistrationMode::kRefine))
+    ->Unit(benchmark::kMillisecond);
+
+// The sensor-aligned check's cost where it runs: `check` 1 (the default) or 0.
+void BM_RegisterLidarSensorAlignedSlide(benchmark::State& state) {
+  RunRegister(state, SensorAlignedSlideTrees(), false, SharedRegistrar(), {}, state.range(1) != 0);
+}
+BENCHMARK(BM_RegisterLidarSensorAlignedSlide)
+    ->ArgNames({"mode", "check"})
+    ->Args({static_cast<int>(RegistrationMode::kNetRefine), 1})
+    ->Args({static_cast<int>(RegistrationMode::kNetRefine), 0})
+    ->Unit(benchmark::kMillisecond);
+
+void BM_RegisterLidarSlowMotion(benchmark::State& state) {
+  RunRegister(state, SlowMotionLidarTrees(), false, SharedRegistrar(), {}, state.range(1) != 0);
+}
+BENCHMARK(BM_RegisterLidarSlowMotion)
+    ->ArgNames({"mode", "check"})
+    ->Args({static_cast<int>(RegistrationMode::kNetRefine), 1})
+    ->Args({static_cast<int>(RegistrationMode::kNetRefine), 0})
     ->Unit(benchmark::kMillisecond);
 
 // Many scans against one reference scan (a map, the last frame of a stream).
