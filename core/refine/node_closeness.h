@@ -35,7 +35,8 @@ struct NodeClosenessOptions {
   size_t max_source_nodes = 2048;
   // When set (sized as the level of `depth`): only the source nodes marked 1 are sampled and only
   // the target nodes marked 1 are partners (the structure off a scan's ground,
-  // dominant_plane.h). Null: every node.
+  // dominant_plane.h). Null: every node. No source node marked, or a mask of the wrong size: not
+  // measurable (negative); no target node marked: every source node is far.
   const std::vector<uint8_t>* source_nodes = nullptr;
   const std::vector<uint8_t>* target_nodes = nullptr;
 };

@@ -93,9 +93,10 @@ bool Closer(double later_cells, double so_far_cells) {
 // The sensor-aligned check's margin: a searched answer replaces a sensor-aligned one when it
 // leaves this much less of the source's structure off the ground without a target partner within
 // a finest cell (OffPlaneFarFractions). Held-out LiDAR pairs 5 and 10 frames apart (pair seeds
-// 3, 1003, 5003, 7003; 512 pairs): the 10 slides to within 1.9 m of the sensor-aligned pose leave
-// 0.10-0.39 more than the searched start refined to the truth; on 185 pairs 1-2 frames apart,
-// where the check runs on right answers, the searched start ends on them (at most 0.002 fewer).
+// 3, 1003, 5003, 7003; 512 pairs): the 10 slides that ended within 1.9 m of the sensor-aligned
+// pose leave 0.10-0.39 more than the searched start refined to the truth (an 11th, at 1.97 m, is
+// why the trigger is a whole search cell); on 185 pairs 1-2 frames apart, where the check runs on
+// right answers, the searched start ends on them (at most 0.002 fewer).
 constexpr double kStructureFarDrop = 0.05;
 
 // A first answer at least this confident (a calibrated probability of being within 1 degree and
@@ -467,12 +468,21 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
               RefineWithFallback(source, target, searched->T_target_source, refinement, cache);
           ++result.starts;
           if (r.ok() && r->valid) {
-            const std::vector<double> far = OffPlaneFarFractions(
-                source, target, {best.T_target_source, r->T_target_source}, finest_depth, 1.0);
+            const std::vector<uint8_t> source_fine =
+                source_plane.OffPlaneNodes(source, finest_depth);
+            const std::vector<uint8_t> target_fine =
+                target_plane.OffPlaneNodes(target, finest_depth);
+            NodeClosenessOptions structure;
+            structure.source_nodes = &source_fine;
+            structure.target_nodes = &target_fine;
+            const std::vector<double> far =
+                FarNodeFractions(source, target, {best.T_target_source, r->T_target_source},
+                                 finest_depth, 1.0, structure);
             if (far[0] >= 0.0 && far[1] >= 0.0 && far[1] <= far[0] - kStructureFarDrop) {
               settle(*r, searched->T_target_source, result);
               result.start = "structure";
               best = *std::move(r);
+              best_closeness.reset();
             }
           }
         }
