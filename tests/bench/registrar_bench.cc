@@ -341,6 +341,16 @@ BENCHMARK(BM_RegisterLidarSensorAlignedSlide)
     ->Args({static_cast<int>(RegistrationMode::kNetRefine), 0})
     ->Unit(benchmark::kMillisecond);
 
+// The headline pairs (about 3 m apart, within a search cell: the check classifies and searches)
+// without it.
+void BM_RegisterLidarNoSensorAlignedCheck(benchmark::State& state) {
+  RunRegister(state, LidarTrees(), false, SharedRegistrar(), {}, false);
+}
+BENCHMARK(BM_RegisterLidarNoSensorAlignedCheck)
+    ->ArgName("mode")
+    ->Arg(static_cast<int>(RegistrationMode::kNetRefine))
+    ->Unit(benchmark::kMillisecond);
+
 void BM_RegisterLidarSlowMotion(benchmark::State& state) {
   RunRegister(state, SlowMotionLidarTrees(), false, SharedRegistrar(), {}, state.range(1) != 0);
 }
