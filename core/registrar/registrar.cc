@@ -439,9 +439,11 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   // rings and density line up whatever the scene did, is compared with the best start a search
   // over the structure off the ground finds, and replaced when that one, refined, leaves clearly
   // fewer structure nodes without a partner. Judged by that structure alone: by fitness the
-  // sensor-aligned pose wins.
-  if (net_refine && options.check_sensor_aligned_answers && best.valid &&
-      IsDeepPair(source, target, refinement)) {
+  // sensor-aligned pose wins. An answer invalid only for its degenerate geometry is checked too
+  // (the rings' pull can leave a slide unconstrained along the street); the replacement must be
+  // valid.
+  if (net_refine && options.check_sensor_aligned_answers &&
+      (best.valid || best.num_degenerate > 0) && IsDeepPair(source, target, refinement)) {
     CorrelativeSearchOptions search;
     const int search_depth = CorrelativeSearchDepth(source, target, search);
     const double aligned_within = CellEdge(target, search_depth);

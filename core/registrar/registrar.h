@@ -99,17 +99,18 @@ struct RegistrationOptions {
   // tab) whose network start is ~20 degrees off about its body ends there: the tab's few nodes
   // give a local step nothing to climb, while the turned pose that meets them fits better.
   bool search_round_axis_start = true;
-  // net+refine on scene-scale trees whose answer puts the two sensors within a search cell of
-  // each other (|t| under 3.75 m on a 240 m LiDAR cube) and whose clouds both have a dominant
-  // plane (a ground, core/refine/dominant_plane.h), whatever the confidence: a search scored on
-  // the structure off the ground (FindCorrelativeStart with node masks) gives a further start,
+  // net+refine on scene-scale trees whose answer (valid, or invalid only for degenerate
+  // geometry) puts the two sensors within a search cell of each other (|t| under 3.75 m on a
+  // 240 m LiDAR cube) and whose clouds both have a dominant plane (a ground,
+  // core/refine/dominant_plane.h), whatever the confidence: a search scored on the structure off
+  // the ground (FindCorrelativeStart with node masks) gives a further start,
   // kept when, refined, it leaves clearly fewer structure nodes without a partner. The ground's
   // rings and density move with the sensor, so on an open scene (a parking lot, 85% ground) the
   // sensor-aligned pose out-fits the true motion by fitness and reads confident. The clouds must
   // be in their sensors' frames (as scans are) for the trigger to mean that; elsewhere it only
   // costs the search. Held-out LiDAR pairs (`rpsr calibrate --evaluate --object_pairs 0
   // --lidar_pairs 64 --pair_seed S`, S = 3, 1003, 5003, 7003), net+refine within (1 deg, 1%):
-  // 5 frames apart 253 -> 255 of 256, 10 frames apart 241 -> 250, confident failures 10 -> 1; no
+  // 5 frames apart 253 -> 255 of 256, 10 frames apart 241 -> 251, confident failures 10 -> 1; no
   // answer lost. Where it runs and the search lands near the answer it costs ~0.4 ms (both trees'
   // planes ~0.3 ms, the search, shifts about the answer's turn, ~0.1 ms; the headline LiDAR pairs,
   // ~3 m apart, pay it); where it refines a further start, that refinement too (~20 ms).

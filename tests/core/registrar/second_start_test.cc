@@ -206,6 +206,33 @@ TEST(RegistrarSecondStartTest, SensorAlignedCheckFindsTheMotionAlongAParkingLot)
   }
 }
 
+// A held-out pair 10 frames apart (pair seed 1003) whose answer slides 14.8 m along a street to the
+// identity translation and is degenerate along it, so invalid: the check runs on it too, and the
+// searched start refines to a valid, right answer.
+TEST(RegistrarSecondStartTest, SensorAlignedCheckAlsoRescuesADegenerateSlide) {
+  LidarStreamOptions stream;
+  stream.frame_offset = 10;
+  stream.pairs_per_sequence = 8;
+  stream.stream_seed = DeriveSeed(1003, 1010);
+  auto pair = MakeLidarPairStream(stream)(30);
+  ASSERT_TRUE(pair.ok()) << pair.status();
+  const Octree source = TreeOf(pair->source, 9);
+  const Octree target = TreeOf(pair->target, 9);
+  RegistrationOptions without;
+  without.check_sensor_aligned_answers = false;
+  auto a = SharedRegistrar().Register(source, target, without);
+  auto b = SharedRegistrar().Register(source, target);
+  ASSERT_TRUE(a.ok() && b.ok());
+  EXPECT_FALSE(a->valid) << "no longer degenerate; pick another pair";
+  EXPECT_GT(a->num_degenerate, 0);
+  EXPECT_GT(ErrorOf(a->T_target_source, pair->T_target_source).translation, 5.0);
+  const PairError eb = ErrorOf(b->T_target_source, pair->T_target_source);
+  EXPECT_TRUE(b->valid) << b->failure_reason;
+  EXPECT_EQ(b->start, "structure");
+  EXPECT_LT(eb.rotation_deg, 1.0);
+  EXPECT_LT(eb.translation, 0.3);
+}
+
 // A mug whose handle is small (3% of its 1,024 points): a cylinder of radius 0.5 and height 1.6
 // about z with a bottom, and a half ring of radius 0.12 outside its wall. Without the handle it
 // would be round about z; the handle alone tells its turns about z apart.
