@@ -123,6 +123,14 @@ bool CalibrationSample::failure() const {
   return rotation_error_deg > 5.0 || translation_error_rel > 0.05;
 }
 
+RegistrationPairGenerator CalibrationLidarPairs(uint64_t pair_seed, int frame_offset) {
+  LidarStreamOptions stream;
+  stream.frame_offset = frame_offset;
+  stream.pairs_per_sequence = 8;  // four sequences (one per street style) per 32 pairs
+  stream.stream_seed = DeriveSeed(pair_seed, 1000 + static_cast<uint64_t>(frame_offset));
+  return MakeLidarPairStream(stream);
+}
+
 absl::StatusOr<std::vector<CalibrationSample>> CollectCalibrationSamples(
     const Registrar& registrar, const CalibrationSetOptions& options) {
   if (options.modes.empty()) return absl::InvalidArgumentError("no registration mode to sample");
@@ -157,16 +165,12 @@ absl::StatusOr<std::vector<CalibrationSample>> CollectCalibrationSamples(
   }
   std::vector<RegistrationPairGenerator> lidar_streams;
   for (size_t o = 0; o < options.lidar_frame_offsets.size(); ++o) {
-    LidarStreamOptions stream;
-    stream.frame_offset = options.lidar_frame_offsets[o];
-    stream.pairs_per_sequence = 8;  // four sequences (one per street style) per 32 pairs
-    stream.stream_seed =
-        DeriveSeed(options.seed, 1000 + static_cast<uint64_t>(stream.frame_offset));
-    lidar_streams.push_back(MakeLidarPairStream(stream));
+    const int frame_offset = options.lidar_frame_offsets[o];
+    lidar_streams.push_back(CalibrationLidarPairs(options.seed, frame_offset));
     for (int i = 0; i < options.lidar_pairs_per_offset; ++i) {
       WorkItem item;
       item.lidar = true;
-      item.setting = absl::StrCat("lidar+", stream.frame_offset);
+      item.setting = absl::StrCat("lidar+", frame_offset);
       item.offset_slot = static_cast<int>(o);
       item.lidar_index = static_cast<uint64_t>(i);
       items.push_back(item);

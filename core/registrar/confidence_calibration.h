@@ -15,6 +15,7 @@
 
 #include "absl/status/statusor.h"
 #include "core/data/object_pairs.h"
+#include "core/data/training_pairs.h"
 #include "core/registrar/confidence_model.h"
 #include "core/registrar/registrar.h"
 
@@ -63,6 +64,12 @@ struct CalibrationSetOptions {
   int threads = 1;
   std::function<void(int done, int total)> progress;
 };
+
+// The simulated LiDAR pairs `frame_offset` frames apart that a calibration set with this pair seed
+// draws (CalibrationSetOptions::seed; `rpsr calibrate --pair_seed`): its i-th LiDAR pair of that
+// offset is pair i here (four street styles in turn, 8 consecutive pairs a sequence). Tests and
+// benchmarks name held-out pairs by it.
+RegistrationPairGenerator CalibrationLidarPairs(uint64_t pair_seed, int frame_offset);
 
 // Generates the pairs, registers them and returns the samples (pair-major, modes in order).
 absl::StatusOr<std::vector<CalibrationSample>> CollectCalibrationSamples(

@@ -17,12 +17,11 @@
 
 #include "benchmark/benchmark.h"
 #include "core/data/object_pairs.h"
-#include "core/data/training_pairs.h"
 #include "core/net/rpsr_net.h"
+#include "core/registrar/confidence_calibration.h"
 #include "core/registrar/embedded_models.h"
 #include "core/registrar/registrar.h"
 #include "core/synth/lidar_sequence.h"
-#include "core/synth/seeded_random.h"
 #include "tests/bench/bench_clouds.h"
 #include "tests/bench/blas_benchmark_main.h"
 
@@ -91,11 +90,7 @@ const TreePairs& LidarTrees() {
 // Pairs of the held-out LiDAR stream (pair seed `pair_seed`, `frame_offset` frames apart, the
 // streams of `rpsr calibrate --evaluate`), full resolution, trees to depth 9.
 TreePairs HeldOutLidarTrees(uint64_t pair_seed, int frame_offset, const std::vector<int>& indices) {
-  LidarStreamOptions stream;
-  stream.frame_offset = frame_offset;
-  stream.pairs_per_sequence = 8;
-  stream.stream_seed = DeriveSeed(pair_seed, 1000 + static_cast<uint64_t>(frame_offset));
-  const RegistrationPairGenerator pairs = MakeLidarPairStream(stream);
+  const RegistrationPairGenerator pairs = CalibrationLidarPairs(pair_seed, frame_offset);
   std::vector<PointCloud> clouds;
   for (int index : indices) {
     RegistrationPair pair = bench::OrDie(pairs(static_cast<uint64_t>(index)), "LiDAR pair");

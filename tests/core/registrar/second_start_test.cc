@@ -12,6 +12,7 @@
 #include "core/data/transform_convention.h"
 #include "core/refine/node_closeness.h"
 #include "core/refine/symmetry_starts.h"
+#include "core/registrar/confidence_calibration.h"
 #include "core/registrar/registrar.h"
 #include "core/synth/lidar_sequence.h"
 #include "core/synth/seeded_random.h"
@@ -136,11 +137,7 @@ TEST(RegistrarSecondStartTest, OfTwoEquallyFittingAnswersTheCloserOneIsKept) {
 // pulls in: with the searched start the answers reach (1 deg, 0.3 m) and are valid; without it
 // they do not.
 TEST(RegistrarSecondStartTest, SearchedStartRescuesMotionsOfTenMetres) {
-  LidarStreamOptions stream;
-  stream.frame_offset = 10;
-  stream.pairs_per_sequence = 8;
-  stream.stream_seed = DeriveSeed(11, 1010);
-  const RegistrationPairGenerator pairs = MakeLidarPairStream(stream);
+  const RegistrationPairGenerator pairs = CalibrationLidarPairs(11, 10);
   for (int index : {25, 31}) {  // 15-16 m off without the search (28 and 56 were too before
                                 // the coarse stages searched two cells)
     auto pair = pairs(index);
@@ -172,11 +169,7 @@ TEST(RegistrarSecondStartTest, SearchedStartRescuesMotionsOfTenMetres) {
 // confidence 0.99 (the ground's rings line up there); with it the search over the structure off
 // the ground finds the true motion.
 TEST(RegistrarSecondStartTest, SensorAlignedCheckFindsTheMotionAlongAParkingLot) {
-  LidarStreamOptions stream;
-  stream.frame_offset = 5;
-  stream.pairs_per_sequence = 8;
-  stream.stream_seed = DeriveSeed(5003, 1005);
-  const RegistrationPairGenerator pairs = MakeLidarPairStream(stream);
+  const RegistrationPairGenerator pairs = CalibrationLidarPairs(5003, 5);
   for (int index : {26, 27}) {
     auto pair = pairs(index);
     ASSERT_TRUE(pair.ok()) << pair.status();
@@ -210,11 +203,7 @@ TEST(RegistrarSecondStartTest, SensorAlignedCheckFindsTheMotionAlongAParkingLot)
 // identity translation and is degenerate along it, so invalid: the check runs on it too, and the
 // searched start refines to a valid, right answer.
 TEST(RegistrarSecondStartTest, SensorAlignedCheckAlsoRescuesADegenerateSlide) {
-  LidarStreamOptions stream;
-  stream.frame_offset = 10;
-  stream.pairs_per_sequence = 8;
-  stream.stream_seed = DeriveSeed(1003, 1010);
-  auto pair = MakeLidarPairStream(stream)(30);
+  auto pair = CalibrationLidarPairs(1003, 10)(30);
   ASSERT_TRUE(pair.ok()) << pair.status();
   const Octree source = TreeOf(pair->source, 9);
   const Octree target = TreeOf(pair->target, 9);
