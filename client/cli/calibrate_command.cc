@@ -141,9 +141,10 @@ int RunCalibrateCommand(const std::vector<std::string>& /*args*/) {
   // clang-format off
   const std::vector<std::string> refused = GivenAmong(
       {"mode", "passes", "refine_from_initial", "search_scene_start", "symmetric_starts",
-       "round_axis_start", "sensor_aligned_check", "rebin_coarse_depths", "joint_finest_stage", "noise_polish",
-       "coarse_wide_search", "line_normals_from_planes", "hold_degenerate_at_initial",
-       "tree_depth", "protocol", "seed", "num_points", "count", "split", "disturbance", "level"});
+       "round_axis_start", "sensor_aligned_check", "rebin_coarse_depths", "joint_finest_stage",
+       "noise_polish", "coarse_wide_search", "line_normals_from_planes",
+       "hold_degenerate_at_initial", "tree_depth", "protocol", "seed", "num_points", "count",
+       "split", "disturbance", "level"});
   // clang-format on
   if (!refused.empty()) {
     std::fprintf(stderr,

@@ -122,16 +122,15 @@ std::vector<uint8_t> DominantPlane::OffPlaneNodes(const Octree& tree, int depth)
   return off;
 }
 
-std::vector<double> OffPlaneFarFractions(const Octree& source, const Octree& target,
+std::vector<double> OffPlaneFarFractions(const Octree& source, const DominantPlane& source_plane,
+                                         const Octree& target, const DominantPlane& target_plane,
                                          const std::vector<Eigen::Isometry3d>& poses, int depth,
-                                         double far_cells, const DominantPlaneOptions& options) {
+                                         double far_cells) {
   if (depth < 1 || depth > source.max_depth() || depth > target.max_depth()) {
     return std::vector<double>(poses.size(), -1.0);
   }
-  const std::vector<uint8_t> source_off =
-      FindDominantPlane(source, depth, options).OffPlaneNodes(source, depth);
-  const std::vector<uint8_t> target_off =
-      FindDominantPlane(target, depth, options).OffPlaneNodes(target, depth);
+  const std::vector<uint8_t> source_off = source_plane.OffPlaneNodes(source, depth);
+  const std::vector<uint8_t> target_off = target_plane.OffPlaneNodes(target, depth);
   NodeClosenessOptions closeness;
   closeness.source_nodes = &source_off;
   closeness.target_nodes = &target_off;

@@ -67,12 +67,13 @@ DominantPlane FindDominantPlane(const Octree& tree, int finest_depth,
 
 // Per pose: the fraction of the source's nodes of `depth` off its dominant plane that lie farther
 // than `far_cells` cells from every target node of `depth` off the target's (FarNodeFractions
-// with both sides' masks; a tree without a dominant plane takes part with all its nodes).
-// Negative where it cannot be measured.
-std::vector<double> OffPlaneFarFractions(const Octree& source, const Octree& target,
+// with both sides' masks, OffPlaneNodes of the planes given, each FindDominantPlane of its tree;
+// a tree without a dominant plane takes part with all its nodes). Negative where it cannot be
+// measured.
+std::vector<double> OffPlaneFarFractions(const Octree& source, const DominantPlane& source_plane,
+                                         const Octree& target, const DominantPlane& target_plane,
                                          const std::vector<Eigen::Isometry3d>& poses, int depth,
-                                         double far_cells,
-                                         const DominantPlaneOptions& options = {});
+                                         double far_cells);
 
 }  // namespace rpsr::core
 

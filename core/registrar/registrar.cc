@@ -96,7 +96,8 @@ bool Closer(double later_cells, double so_far_cells) {
 // 3, 1003, 5003, 7003; 512 pairs): the 10 slides that ended within 1.9 m of the sensor-aligned
 // pose leave 0.10-0.39 more than the searched start refined to the truth (an 11th, at 1.97 m, is
 // why the trigger is a whole search cell); on 185 pairs 1-2 frames apart, where the check runs on
-// right answers, the searched start ends on them (at most 0.002 fewer).
+// right answers, an earlier variant's searched start (turns too, about the identity) refined back
+// onto them (at most 0.002 fewer); the shipped one refines none of them (below).
 constexpr double kStructureFarDrop = 0.05;
 
 // A first answer at least this confident (a calibrated probability of being within 1 degree and
@@ -447,7 +448,6 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
     CorrelativeSearchOptions search;
     const int search_depth = CorrelativeSearchDepth(source, target, search);
     const double aligned_within = CellEdge(target, search_depth);
-    const Eigen::Vector3d source_centre = source.level(0).center_of_mass[0].cast<double>();
     if (best.T_target_source.translation().norm() < aligned_within) {
       const DominantPlane source_plane = FindDominantPlane(source, finest_depth);
       const DominantPlane target_plane = FindDominantPlane(target, finest_depth);
@@ -465,6 +465,7 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
         // A candidate within a search cell of the answer would be refined back onto it: on 256
         // scan pairs 1-2 frames apart (pair seeds 1003, 5003), where the check runs on right
         // answers, none refined a further start and no answer moved.
+        const Eigen::Vector3d source_centre = source.level(0).center_of_mass[0].cast<double>();
         const bool near_answer =
             searched.ok() &&
             ErrorOf(searched->T_target_source, best.T_target_source).rotation_deg < 2.0 &&
@@ -475,16 +476,9 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
               RefineWithFallback(source, target, searched->T_target_source, refinement, cache);
           ++result.starts;
           if (r.ok() && r->valid) {
-            const std::vector<uint8_t> source_fine =
-                source_plane.OffPlaneNodes(source, finest_depth);
-            const std::vector<uint8_t> target_fine =
-                target_plane.OffPlaneNodes(target, finest_depth);
-            NodeClosenessOptions structure;
-            structure.source_nodes = &source_fine;
-            structure.target_nodes = &target_fine;
             const std::vector<double> far =
-                FarNodeFractions(source, target, {best.T_target_source, r->T_target_source},
-                                 finest_depth, 1.0, structure);
+                OffPlaneFarFractions(source, source_plane, target, target_plane,
+                                     {best.T_target_source, r->T_target_source}, finest_depth, 1.0);
             if (far[0] >= 0.0 && far[1] >= 0.0 && far[1] <= far[0] - kStructureFarDrop) {
               settle(*r, searched->T_target_source, result);
               result.start = "structure";

@@ -128,7 +128,8 @@ TEST(DominantPlaneTest, TheStructureNotTheGroundTellsTheTrueShift) {
   truth.translation().x() = 8.0;  // source points into the target's frame
   const std::vector<Eigen::Isometry3d> poses = {Eigen::Isometry3d::Identity(), truth};
   const std::vector<double> all = FarNodeFractions(source, target, poses, 9, 1.0);
-  const std::vector<double> structure = OffPlaneFarFractions(source, target, poses, 9, 1.0);
+  const std::vector<double> structure = OffPlaneFarFractions(
+      source, FindDominantPlane(source, 9), target, FindDominantPlane(target, 9), poses, 9, 1.0);
   ASSERT_EQ(structure.size(), 2u);
   EXPECT_LT(all[0], all[1]) << "the rings favour the identity";
   EXPECT_LT(structure[1] + 0.3, structure[0]) << "the structure favours the truth";
