@@ -153,7 +153,8 @@ struct RegisterOptions {
   // RegisterOptions.round_axis_start).
   bool round_axis_start = true;
   // Check a scene-scale answer that puts the two sensors together against a search over the
-  // structure off the ground (proto RegisterOptions.sensor_aligned_check).
+  // structure off the ground (proto RegisterOptions.sensor_aligned_check); in mode refine a
+  // losing answer is kept but doubted (confidence capped, failure_reason naming the other pose).
   bool sensor_aligned_check = true;
   // The refinement's coarse depths on the target's cells (proto RegisterOptions; false: the
   // source tree's own cells).

@@ -62,7 +62,8 @@ ABSL_FLAG(bool, sensor_aligned_check, true,
           "eval, register, odometry, bench, net+refine on scene-scale trees: when the answer puts "
           "the two sensors within a search cell of each other and both clouds have a ground, "
           "also refine from a search scored on the structure off the ground and keep it when it "
-          "leaves clearly fewer structure nodes without a partner");
+          "leaves clearly fewer structure nodes without a partner (mode refine: keep the answer "
+          "but report it doubted, its confidence capped)");
 ABSL_FLAG(bool, symmetric_starts, false,
           "eval, register, odometry, bench, net+refine on object-scale trees (experimental): "
           "when the target has near-symmetries (a gear's teeth), also refine the answer turned "

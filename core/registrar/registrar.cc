@@ -100,6 +100,57 @@ bool Closer(double later_cells, double so_far_cells) {
 // onto them (at most 0.002 fewer); the shipped one refines none of them (below).
 constexpr double kStructureFarDrop = 0.05;
 
+// What the sensor-aligned check found: another start, refined, that fits the structure off the
+// ground clearly better than the answer.
+struct StructureStart {
+  Eigen::Isometry3d start_pose = Eigen::Isometry3d::Identity();
+  TreeRefinementResult refined;
+};
+
+// The sensor-aligned check's search (see Finish): nullopt when the answer does not put the
+// sensors within a search cell of each other, either tree lacks a dominant plane, the search lands
+// near the answer, or the other start, refined, is invalid or not clearly better by the
+// structure. `starts` counts a refinement run here.
+std::optional<StructureStart> FindStructureStart(const Octree& source, const Octree& target,
+                                                 const Eigen::Isometry3d& answer, int finest_depth,
+                                                 const TreeRefinementOptions& refinement,
+                                                 TreeRefinementCache& cache, int& starts) {
+  CorrelativeSearchOptions search;
+  const int search_depth = CorrelativeSearchDepth(source, target, search);
+  const double aligned_within = CellEdge(target, search_depth);
+  if (answer.translation().norm() >= aligned_within) return std::nullopt;
+  const DominantPlane source_plane = FindDominantPlane(source, finest_depth);
+  const DominantPlane target_plane = FindDominantPlane(target, finest_depth);
+  if (!source_plane.found || !target_plane.found) return std::nullopt;
+  const std::vector<uint8_t> source_off = source_plane.OffPlaneNodes(source, search_depth);
+  const std::vector<uint8_t> target_off = target_plane.OffPlaneNodes(target, search_depth);
+  search.source_nodes = &source_off;
+  search.target_nodes = &target_off;
+  // Shifts only, about the answer: the rings are round, so a sensor-aligned answer's turn is
+  // right (the slides' rotation errors were 0.02-0.08 degrees), and searching turns too would
+  // cost ~2.5 ms a pair instead of ~0.1.
+  search.max_yaw_deg = 0.0;
+  absl::StatusOr<CorrelativeStart> searched = FindCorrelativeStart(source, target, answer, search);
+  if (!searched.ok()) return std::nullopt;
+  // A candidate within a search cell of the answer would be refined back onto it: on 256 scan
+  // pairs 1-2 frames apart (pair seeds 1003, 5003), where the check runs on right answers, none
+  // refined a further start and no answer moved.
+  const Eigen::Vector3d source_centre = source.level(0).center_of_mass[0].cast<double>();
+  if (ErrorOf(searched->T_target_source, answer).rotation_deg < 2.0 &&
+      (searched->T_target_source * source_centre - answer * source_centre).norm() <
+          aligned_within) {
+    return std::nullopt;
+  }
+  absl::StatusOr<TreeRefinementResult> r =
+      RefineWithFallback(source, target, searched->T_target_source, refinement, cache);
+  ++starts;
+  if (!r.ok() || !r->valid) return std::nullopt;
+  const std::vector<double> far = OffPlaneFarFractions(
+      source, source_plane, target, target_plane, {answer, r->T_target_source}, finest_depth, 1.0);
+  if (far[0] < 0.0 || far[1] < 0.0 || far[1] > far[0] - kStructureFarDrop) return std::nullopt;
+  return StructureStart{searched->T_target_source, *std::move(r)};
+}
+
 // A first answer at least this confident (a calibrated probability of being within 1 degree and
 // 1% of the extent) is kept without trying the initial guess as a second start.
 constexpr double kConfidentEnough = 0.9;
@@ -438,56 +489,32 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   // The sensor-aligned check (RegistrationOptions::check_sensor_aligned_answers): a scene-scale
   // answer that puts the two sensors within a search cell of each other, where the ground's
   // rings and density line up whatever the scene did, is compared with the best start a search
-  // over the structure off the ground finds, and replaced when that one, refined, leaves clearly
-  // fewer structure nodes without a partner. Judged by that structure alone: by fitness the
+  // over the structure off the ground finds. Judged by that structure alone: by fitness the
   // sensor-aligned pose wins. An answer invalid only for its degenerate geometry is checked too
-  // (the rings' pull can leave a slide unconstrained along the street); the replacement must be
-  // valid.
-  if (net_refine && options.check_sensor_aligned_answers &&
+  // (the rings' pull can leave a slide unconstrained along the street); the other start, refined,
+  // must be valid and leave clearly fewer structure nodes without a partner (kStructureFarDrop).
+  // net+refine takes it as its answer; mode refine, whose answer is the caller's start refined,
+  // keeps its answer and reports it as doubted (its confidence capped), naming the other pose.
+  const bool refine_only = options.mode == RegistrationMode::kRefine;
+  if ((net_refine || refine_only) && options.check_sensor_aligned_answers &&
       (best.valid || best.num_degenerate > 0) && IsDeepPair(source, target, refinement)) {
-    CorrelativeSearchOptions search;
-    const int search_depth = CorrelativeSearchDepth(source, target, search);
-    const double aligned_within = CellEdge(target, search_depth);
-    if (best.T_target_source.translation().norm() < aligned_within) {
-      const DominantPlane source_plane = FindDominantPlane(source, finest_depth);
-      const DominantPlane target_plane = FindDominantPlane(target, finest_depth);
-      if (source_plane.found && target_plane.found) {
-        const std::vector<uint8_t> source_off = source_plane.OffPlaneNodes(source, search_depth);
-        const std::vector<uint8_t> target_off = target_plane.OffPlaneNodes(target, search_depth);
-        search.source_nodes = &source_off;
-        search.target_nodes = &target_off;
-        // Shifts only, about the answer: the rings are round, so a sensor-aligned answer's turn
-        // is right (the slides' rotation errors were 0.02-0.08 degrees), and searching turns too
-        // would cost ~2.5 ms a pair instead of ~0.1.
-        search.max_yaw_deg = 0.0;
-        absl::StatusOr<CorrelativeStart> searched =
-            FindCorrelativeStart(source, target, best.T_target_source, search);
-        // A candidate within a search cell of the answer would be refined back onto it: on 256
-        // scan pairs 1-2 frames apart (pair seeds 1003, 5003), where the check runs on right
-        // answers, none refined a further start and no answer moved.
-        const Eigen::Vector3d source_centre = source.level(0).center_of_mass[0].cast<double>();
-        const bool near_answer =
-            searched.ok() &&
-            ErrorOf(searched->T_target_source, best.T_target_source).rotation_deg < 2.0 &&
-            (searched->T_target_source * source_centre - best.T_target_source * source_centre)
-                    .norm() < aligned_within;
-        if (searched.ok() && !near_answer) {
-          absl::StatusOr<TreeRefinementResult> r =
-              RefineWithFallback(source, target, searched->T_target_source, refinement, cache);
-          ++result.starts;
-          if (r.ok() && r->valid) {
-            const std::vector<double> far =
-                OffPlaneFarFractions(source, source_plane, target, target_plane,
-                                     {best.T_target_source, r->T_target_source}, finest_depth, 1.0);
-            if (far[0] >= 0.0 && far[1] >= 0.0 && far[1] <= far[0] - kStructureFarDrop) {
-              settle(*r, searched->T_target_source, result);
-              result.start = "structure";
-              best = *std::move(r);
-              best_closeness.reset();
-            }
-          }
-        }
-      }
+    std::optional<StructureStart> structure = FindStructureStart(
+        source, target, best.T_target_source, finest_depth, refinement, cache, result.starts);
+    if (structure.has_value() && net_refine) {
+      settle(structure->refined, structure->start_pose, result);
+      result.start = "structure";
+      best = std::move(structure->refined);
+      best_closeness.reset();
+    } else if (structure.has_value()) {
+      result.confidence = std::min(result.confidence, confidence.degenerate_cap);
+      const Eigen::Vector3d t = structure->refined.T_target_source.translation();
+      absl::StrAppend(&result.failure_reason, result.failure_reason.empty() ? "" : "; ",
+                      absl::StrFormat("doubted: the structure off the ground plane fits "
+                                      "another pose clearly better (translation %.3f %.3f %.3f, "
+                                      "the sensors %.3g apart instead of %.3g); refine from it "
+                                      "or use mode net+refine",
+                                      t.x(), t.y(), t.z(), t.norm(),
+                                      best.T_target_source.translation().norm()));
     }
   }
   // The round-axis start (RegistrationOptions::search_round_axis_start). Skipped where the target

@@ -16,12 +16,15 @@
 #include "core/registrar/registrar.h"
 #include "core/synth/lidar_sequence.h"
 #include "core/synth/seeded_random.h"
+#include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/core/registrar/registrar_test_util.h"
 
 namespace rpsr::core {
 namespace {
 
+using ::testing::HasSubstr;
+using ::testing::Not;
 using testing_util::SharedRegistrar;
 using testing_util::TreeOf;
 
@@ -205,13 +208,47 @@ TEST(RegistrarSecondStartTest, SensorAlignedCheckFindsTheMotionOfSlidScans) {
     EXPECT_TRUE(b->valid) << b->failure_reason;
     EXPECT_EQ(b->start, "structure");
     EXPECT_EQ(b->starts, a->starts + 1);
-    // Mode refine has no further starts.
+    // Mode refine keeps its one answer, the start refined, and doubts the slide.
+    RegistrationOptions refine;
+    refine.mode = RegistrationMode::kRefine;
+    auto c = SharedRegistrar().Register(source, target, refine);
+    refine.check_sensor_aligned_answers = false;
+    auto d = SharedRegistrar().Register(source, target, refine);
+    ASSERT_TRUE(c.ok() && d.ok());
+    EXPECT_EQ(c->start, "initial");
+    EXPECT_TRUE(c->T_target_source.isApprox(d->T_target_source, 1e-12));
+    if (!slide.degenerate) {
+      EXPECT_GT(ErrorOf(d->T_target_source, pair->T_target_source).translation, 5.0);
+      EXPECT_GT(d->confidence, 0.9) << "a confident slide in mode refine too";
+      EXPECT_TRUE(c->valid);
+      EXPECT_LE(c->confidence, 0.05);
+      EXPECT_THAT(c->failure_reason, HasSubstr("doubted"));
+    }
+  }
+}
+
+// The check runs on right answers too (pairs 2 frames apart, the sensors 1-2 m apart, where it
+// always runs): mode refine does not doubt them.
+TEST(RegistrarSecondStartTest, SensorAlignedCheckLeavesRightRefineAnswersAlone) {
+  int checked = 0;
+  for (int index = 0; index < 8; ++index) {
+    auto pair = CalibrationLidarPairs(5003, 2)(index);
+    ASSERT_TRUE(pair.ok()) << pair.status();
+    ASSERT_LT(pair->T_target_source.translation().norm(), 3.5) << "the check would not run";
+    const Octree source = TreeOf(pair->source, 9);
+    const Octree target = TreeOf(pair->target, 9);
     RegistrationOptions refine;
     refine.mode = RegistrationMode::kRefine;
     auto c = SharedRegistrar().Register(source, target, refine);
     ASSERT_TRUE(c.ok());
-    EXPECT_NE(c->start, "structure");
+    const PairError e = ErrorOf(c->T_target_source, pair->T_target_source);
+    if (e.rotation_deg > 1.0 || e.translation > 0.3) continue;
+    SCOPED_TRACE(testing::Message() << "pair " << index);
+    EXPECT_GT(c->confidence, 0.5);
+    EXPECT_THAT(c->failure_reason, Not(HasSubstr("doubted")));
+    ++checked;
   }
+  EXPECT_GE(checked, 6) << "mode refine misses these pairs; pick others";
 }
 
 // A mug whose handle is small (3% of its 1,024 points): a cylinder of radius 0.5 and height 1.6
