@@ -193,7 +193,8 @@ struct ServerTimings {
 
 struct RegistrationResult {
   Eigen::Isometry3d T_target_source = Eigen::Isometry3d::Identity();
-  // false: do not use T; failure_reason says why.
+  // false: do not use T; failure_reason says why (on a valid result: a doubt, see
+  // RegisterOptions::sensor_aligned_check).
   bool valid = false;
   std::string failure_reason;
   // Calibrated probability that T is within (1 degree, 1% of the target's extent) of the truth.

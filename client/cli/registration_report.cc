@@ -147,8 +147,10 @@ std::string FormatReportText(const PairReport& report) {
                         report.valid ? "yes" : "no", report.confidence, report.fitness,
                         report.inlier_rmse, report.iterations, report.mode, report.start,
                         report.starts, 1e3 * report.seconds);
-  if (!report.valid && !report.failure_reason.empty()) {
-    absl::StrAppend(&out, "reason: ", report.failure_reason, "\n");
+  if (!report.failure_reason.empty()) {
+    // On a valid answer it is a doubt the pipeline has about it (mode refine's sensor-aligned
+    // check: another pose fits the structure off the ground clearly better).
+    absl::StrAppend(&out, report.valid ? "note: " : "reason: ", report.failure_reason, "\n");
   }
   if (report.noise_polished) {
     // Worth a line: the clouds are noisier than the finest cells, and the answer's precision is

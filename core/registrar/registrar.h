@@ -146,7 +146,9 @@ struct RegistrationTimings {
 struct RegistrationResult {
   Eigen::Isometry3d T_target_source = Eigen::Isometry3d::Identity();
   // false: do not use T. failure_reason says why in words a user can act on (no overlap, too
-  // little fitness, degenerate geometry naming the axes, the network's output not finite).
+  // little fitness, degenerate geometry naming the axes, the network's output not finite). On a
+  // valid result it is empty unless the pipeline doubts the answer (mode refine's sensor-aligned
+  // check, check_sensor_aligned_answers; the confidence is capped then).
   bool valid = false;
   std::string failure_reason;
   // Calibrated probability that T is within (1 degree, 1% of the target's extent) of the truth.
