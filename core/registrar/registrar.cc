@@ -110,8 +110,10 @@ struct StructureStart {
 // The sensor-aligned check's search (see Finish): nullopt when the answer does not put the
 // sensors within a search cell of each other, either tree lacks a dominant plane, the search lands
 // near the answer, or the other start, refined, is invalid or not clearly better by the
-// structure. `starts` counts a refinement run here.
+// structure. `target_plane_prepared`: the target's FindDominantPlane at `finest_depth` when a
+// prepared target holds it (null: found here). `starts` counts a refinement run here.
 std::optional<StructureStart> FindStructureStart(const Octree& source, const Octree& target,
+                                                 const DominantPlane* target_plane_prepared,
                                                  const Eigen::Isometry3d& answer, int finest_depth,
                                                  const TreeRefinementOptions& refinement,
                                                  TreeRefinementCache& cache, int& starts) {
@@ -120,8 +122,12 @@ std::optional<StructureStart> FindStructureStart(const Octree& source, const Oct
   const double aligned_within = CellEdge(target, search_depth);
   if (answer.translation().norm() >= aligned_within) return std::nullopt;
   const DominantPlane source_plane = FindDominantPlane(source, finest_depth);
-  const DominantPlane target_plane = FindDominantPlane(target, finest_depth);
-  if (!source_plane.found || !target_plane.found) return std::nullopt;
+  if (!source_plane.found) return std::nullopt;
+  DominantPlane found_here;
+  if (target_plane_prepared == nullptr) found_here = FindDominantPlane(target, finest_depth);
+  const DominantPlane& target_plane =
+      target_plane_prepared != nullptr ? *target_plane_prepared : found_here;
+  if (!target_plane.found) return std::nullopt;
   const std::vector<uint8_t> source_off = source_plane.OffPlaneNodes(source, search_depth);
   const std::vector<uint8_t> target_off = target_plane.OffPlaneNodes(target, search_depth);
   search.source_nodes = &source_off;
@@ -498,8 +504,14 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   const bool refine_only = options.mode == RegistrationMode::kRefine;
   if ((net_refine || refine_only) && options.check_sensor_aligned_answers &&
       (best.valid || best.num_degenerate > 0) && IsDeepPair(source, target, refinement)) {
-    std::optional<StructureStart> structure = FindStructureStart(
-        source, target, best.T_target_source, finest_depth, refinement, cache, result.starts);
+    const DominantPlane* prepared_plane = prepared != nullptr &&
+                                                  prepared->dominant_plane.has_value() &&
+                                                  prepared->dominant_plane_depth == finest_depth
+                                              ? &*prepared->dominant_plane
+                                              : nullptr;
+    std::optional<StructureStart> structure =
+        FindStructureStart(source, target, prepared_plane, best.T_target_source, finest_depth,
+                           refinement, cache, result.starts);
     if (structure.has_value() && net_refine) {
       settle(structure->refined, structure->start_pose, result);
       result.start = "structure";
@@ -613,6 +625,10 @@ absl::StatusOr<std::shared_ptr<const PreparedTarget>> Registrar::PrepareTarget(
   if (!IsDeepPair(target, target, TreeRefinementOptions{})) {
     prepared->symmetries = FindSelfSymmetries(target);
     prepared->bytes_ += prepared->symmetries->size() * sizeof(SelfSymmetry);
+  } else {
+    prepared->dominant_plane_depth = StageDepths(target, target, TreeRefinementOptions{}).second;
+    prepared->dominant_plane = FindDominantPlane(target, prepared->dominant_plane_depth);
+    prepared->bytes_ += prepared->dominant_plane->on_plane.size();
   }
   return std::shared_ptr<const PreparedTarget>(std::move(prepared));
 }

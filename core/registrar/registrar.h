@@ -21,6 +21,7 @@
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
 #include "absl/types/span.h"
+#include "core/refine/dominant_plane.h"
 #include "core/refine/symmetry_starts.h"
 #include "core/refine/tree_refinement.h"
 #include "core/tree/bh_tree.h"
@@ -236,6 +237,11 @@ class PreparedTarget {
   // The target's near-symmetries (FindSelfSymmetries), found once when it is object-scale on its
   // own (a scene's are never read); unset otherwise, and a pair that needs them finds its own.
   std::optional<std::vector<SelfSymmetry>> symmetries;
+  // The target's dominant plane (FindDominantPlane) at its own finest depth, found once when it
+  // is scene-scale on its own; the sensor-aligned check reads it for pairs refined to that depth
+  // (a pair whose finest depth differs finds its own).
+  std::optional<DominantPlane> dominant_plane;
+  int dominant_plane_depth = 0;
   size_t bytes_ = 0;
 };
 

@@ -208,6 +208,14 @@ TEST(RegistrarSecondStartTest, SensorAlignedCheckFindsTheMotionOfSlidScans) {
     EXPECT_TRUE(b->valid) << b->failure_reason;
     EXPECT_EQ(b->start, "structure");
     EXPECT_EQ(b->starts, a->starts + 1);
+    // A prepared target holds its plane: the same answer.
+    auto prepared = SharedRegistrar().PrepareTarget(target);
+    ASSERT_TRUE(prepared.ok()) << prepared.status();
+    auto from_prepared = SharedRegistrar().Register(source, **prepared);
+    ASSERT_TRUE(from_prepared.ok());
+    EXPECT_EQ(from_prepared->start, "structure");
+    EXPECT_LT(ErrorOf(from_prepared->T_target_source, b->T_target_source).rotation_deg, 0.01);
+    EXPECT_LT(ErrorOf(from_prepared->T_target_source, b->T_target_source).translation, 0.01);
     // Mode refine keeps its one answer, the start refined, and doubts the slide.
     RegistrationOptions refine;
     refine.mode = RegistrationMode::kRefine;
