@@ -5,8 +5,8 @@
 // for objects and 25 ms for LiDAR scans. The *SmallModel rows run the same object pairs through
 // the embedded objects-small model (core/models/objects-small: a quarter of the default's
 // convolution FLOPs) and report an error when it is not embedded. The *SensorAlignedSlide and
-// *SlowMotion rows time net+refine with and without the sensor-aligned check on held-out pairs
-// where it runs.
+// *SlowMotion rows time net+refine and refine with and without the sensor-aligned check on
+// held-out pairs where it runs (refine: the check doubts the slides, refining the other start).
 //
 //   OMP_WAIT_POLICY=PASSIVE build/tests/bench/registrar_bench --benchmark_counters_tabular=true
 #include <cstdlib>
@@ -334,6 +334,8 @@ BENCHMARK(BM_RegisterLidarSensorAlignedSlide)
     ->ArgNames({"mode", "check"})
     ->Args({static_cast<int>(RegistrationMode::kNetRefine), 1})
     ->Args({static_cast<int>(RegistrationMode::kNetRefine), 0})
+    ->Args({static_cast<int>(RegistrationMode::kRefine), 1})
+    ->Args({static_cast<int>(RegistrationMode::kRefine), 0})
     ->Unit(benchmark::kMillisecond);
 
 // The headline pairs (about 3 m apart, within a search cell: the check classifies and searches)
@@ -353,6 +355,8 @@ BENCHMARK(BM_RegisterLidarSlowMotion)
     ->ArgNames({"mode", "check"})
     ->Args({static_cast<int>(RegistrationMode::kNetRefine), 1})
     ->Args({static_cast<int>(RegistrationMode::kNetRefine), 0})
+    ->Args({static_cast<int>(RegistrationMode::kRefine), 1})
+    ->Args({static_cast<int>(RegistrationMode::kRefine), 0})
     ->Unit(benchmark::kMillisecond);
 
 // Many scans against one reference scan (a map, the last frame of a stream).
