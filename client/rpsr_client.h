@@ -217,7 +217,8 @@ struct RegistrationResult {
   Eigen::Isometry3d net_T_target_source = Eigen::Isometry3d::Identity();
   double net_score_peak = 0.0;
   std::string mode;
-  // Where the returned pose's refinement started ("network", "initial", "searched", "structure",
+  // Where the returned pose's refinement started ("network", "initial", "searched",
+  // "searched_turns", "structure",
   // "round_axis", "symmetric") and how many starts the server refined for this pair (proto
   // RegistrationResult.start, .starts).
   std::string start;

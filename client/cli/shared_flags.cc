@@ -52,7 +52,7 @@ ABSL_FLAG(
     bool, search_scene_start, true,
     "eval, register, odometry, bench, net+refine on scene-scale trees: when the answer is still "
     "below 0.9 confidence, search a start (turns about z, assumed up; shifts of whole "
-    "cells) and refine from it too");
+    "cells) and refine from it too; still not confident, search every turn as well");
 ABSL_FLAG(bool, round_axis_start, true,
           "eval, register, odometry, bench, net+refine on object-scale trees: when the answer is "
           "below 0.9 confidence and the target is round about a principal axis (a cup with a "

@@ -78,7 +78,10 @@ struct RegistrationOptions {
   // on a 240 m cube, scored by occupied cells; ~4 ms) and refine from it too, keeping that answer
   // if it is clearly better. The object network is no LiDAR network and the refinement's basin
   // does not hold every motion of 10 m: on 64 simulated LiDAR pairs 10 frames apart recall at
-  // (1 deg, 0.3 m) went 0.781 -> 0.938, on 64 pairs 5 frames apart it stayed 1.000.
+  // (1 deg, 0.3 m) went 0.781 -> 0.938, on 64 pairs 5 frames apart it stayed 1.000. When the
+  // answer is still not confident, the same search over every turn about z (9-degree steps, ~5
+  // ms) gives one more start, refined when it turns beyond +-20 degrees (a vehicle turning at a
+  // junction: 40-70 degrees in 10 frames).
   bool search_scene_start = true;
   // net+refine on object-scale trees (experimental, off by default): when the target has
   // near-symmetries (FindSelfSymmetries, core/refine/symmetry_starts.h: a gear's teeth), the
@@ -183,7 +186,8 @@ struct RegistrationResult {
   // Where the returned pose's refinement started: "network" (net+refine's first start; mode net's
   // single evaluation), "initial" (the caller's guess or identity: mode refine's only start,
   // net+refine's second), "searched" (net+refine's third on scene-scale trees,
-  // RegistrationOptions::search_scene_start), "structure" (a further one there, the
+  // RegistrationOptions::search_scene_start), "searched_turns" (its fourth there, the same search
+  // over every turn), "structure" (a further one there, the
   // sensor-aligned check's: check_sensor_aligned_answers), "round_axis" (its third on
   // object-scale trees without near-symmetries, search_round_axis_start) or "symmetric" (its
   // third on those with, try_symmetric_starts); and how many starts were refined for this pair

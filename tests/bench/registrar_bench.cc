@@ -115,6 +115,13 @@ const TreePairs& SlowMotionLidarTrees() {
   return *pairs;
 }
 
+// Two pairs 10 frames apart at junctions (the vehicle turns 54-69 degrees): no start but the
+// search over every turn reaches them, after every other start ended unconfident.
+const TreePairs& JunctionTurnLidarTrees() {
+  static const TreePairs* pairs = new TreePairs{HeldOutLidarTrees(7003, 10, {24, 58})};
+  return *pairs;
+}
+
 // `prepared`: each target prepared once beforehand (Registrar::PrepareTarget), as a caller that
 // registers many sources against one reference would; the preparation is not timed.
 // `refinement`: the refinement's options (the *FinestAlone and *CoarseOneCell rows turn one of its
@@ -357,6 +364,15 @@ BENCHMARK(BM_RegisterLidarSlowMotion)
     ->Args({static_cast<int>(RegistrationMode::kNetRefine), 0})
     ->Args({static_cast<int>(RegistrationMode::kRefine), 1})
     ->Args({static_cast<int>(RegistrationMode::kRefine), 0})
+    ->Unit(benchmark::kMillisecond);
+
+// What a junction's turn costs net+refine: every start, the search over every turn included.
+void BM_RegisterLidarJunctionTurn(benchmark::State& state) {
+  RunRegister(state, JunctionTurnLidarTrees());
+}
+BENCHMARK(BM_RegisterLidarJunctionTurn)
+    ->ArgName("mode")
+    ->Arg(static_cast<int>(RegistrationMode::kNetRefine))
     ->Unit(benchmark::kMillisecond);
 
 // Many scans against one reference scan (a map, the last frame of a stream).

@@ -259,6 +259,33 @@ TEST(RegistrarSecondStartTest, SensorAlignedCheckLeavesRightRefineAnswersAlone) 
   EXPECT_GE(checked, 6) << "mode refine misses these pairs; pick others";
 }
 
+// Held-out pairs 10 frames apart where the vehicle turns 54-69 degrees at a junction: every start
+// within +-20 degrees of the identity ends 50-75 degrees off at confidence 0; the search over
+// every turn finds the turn.
+TEST(RegistrarSecondStartTest, SearchOverEveryTurnFindsAJunctionTurn) {
+  for (int index : {24, 58}) {
+    SCOPED_TRACE(testing::Message() << "pair seed 7003, 10 frames apart, pair " << index);
+    auto pair = CalibrationLidarPairs(7003, 10)(index);
+    ASSERT_TRUE(pair.ok()) << pair.status();
+    ASSERT_GT(ErrorOf(pair->T_target_source, Eigen::Isometry3d::Identity()).rotation_deg, 45.0);
+    const Octree source = TreeOf(pair->source, 9);
+    const Octree target = TreeOf(pair->target, 9);
+    RegistrationOptions without;
+    without.search_scene_start = false;
+    auto a = SharedRegistrar().Register(source, target, without);
+    auto b = SharedRegistrar().Register(source, target);
+    ASSERT_TRUE(a.ok() && b.ok());
+    EXPECT_GT(ErrorOf(a->T_target_source, pair->T_target_source).rotation_deg, 20.0)
+        << "no longer missed without the search; pick another pair";
+    EXPECT_LT(a->confidence, 0.1);
+    const PairError e = ErrorOf(b->T_target_source, pair->T_target_source);
+    EXPECT_LT(e.rotation_deg, 1.0);
+    EXPECT_LT(e.translation, 0.3);
+    EXPECT_EQ(b->start, "searched_turns");
+    EXPECT_GT(b->confidence, 0.9);
+  }
+}
+
 // A mug whose handle is small (3% of its 1,024 points): a cylinder of radius 0.5 and height 1.6
 // about z with a bottom, and a half ring of radius 0.12 outside its wall. Without the handle it
 // would be round about z; the handle alone tells its turns about z apart.
