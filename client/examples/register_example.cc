@@ -60,6 +60,9 @@ int main(int argc, char** argv) {
   std::printf("valid %s, confidence %.3f, fitness %.3f, mode %s, %.1f ms round trip\n",
               result->valid ? "yes" : "no", result->confidence, result->fitness,
               result->mode.c_str(), 1e3 * result->round_trip_seconds);
-  if (!result->valid) std::printf("reason: %s\n", result->failure_reason.c_str());
+  // On a valid result a reason is a doubt (RegisterOptions::sensor_aligned_check in mode refine).
+  if (!result->failure_reason.empty()) {
+    std::printf("%s: %s\n", result->valid ? "note" : "reason", result->failure_reason.c_str());
+  }
   return result->valid ? 0 : 1;
 }

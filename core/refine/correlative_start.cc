@@ -108,6 +108,10 @@ absl::StatusOr<CorrelativeStart> FindCorrelativeStart(const Octree& source, cons
   // the search's time is bounded whatever the input).
   const double yaw_step = rms_r > 0 ? std::max(0.5 * edge / rms_r, max_yaw / 20.0) : max_yaw + 1.0;
   const int yaw_half_steps = yaw_step > 0 ? static_cast<int>(std::floor(max_yaw / yaw_step)) : 0;
+  // A search over every turn would try +-180 degrees twice (the same rotation).
+  const int yaw_last = yaw_half_steps > 0 && yaw_half_steps * yaw_step >= M_PI - 1e-9
+                           ? yaw_half_steps - 1
+                           : yaw_half_steps;
   const int shift = options.max_shift_cells;
 
   CorrelativeStart best;
@@ -115,7 +119,7 @@ absl::StatusOr<CorrelativeStart> FindCorrelativeStart(const Octree& source, cons
   int best_hits = -1;
   int64_t best_distance = 0;  // ties go to the candidate nearest the initial guess
   std::vector<std::array<int64_t, 3>> cell(used);
-  for (int yi = -yaw_half_steps; yi <= yaw_half_steps; ++yi) {
+  for (int yi = -yaw_half_steps; yi <= yaw_last; ++yi) {
     const double yaw = yi * yaw_step;
     const Eigen::Matrix3d Rz = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
     for (size_t k = 0; k < used; ++k) {

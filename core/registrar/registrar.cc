@@ -517,8 +517,11 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   // net+refine takes it as its answer; mode refine, whose answer is the caller's start refined,
   // keeps its answer and reports it as doubted (its confidence capped), naming the other pose.
   const bool refine_only = options.mode == RegistrationMode::kRefine;
-  if ((net_refine || refine_only) && options.check_sensor_aligned_answers &&
-      (best.valid || best.num_degenerate > 0) && IsDeepPair(source, target, refinement)) {
+  // Mode refine doubts valid answers only (an invalid one reads 0 already); neither mode checks
+  // when the caller asked for evaluation without updates.
+  if (options.check_sensor_aligned_answers && !refinement.evaluate_only &&
+      (net_refine ? best.valid || best.num_degenerate > 0 : refine_only && best.valid) &&
+      IsDeepPair(source, target, refinement)) {
     const DominantPlane* prepared_plane = prepared != nullptr &&
                                                   prepared->dominant_plane.has_value() &&
                                                   prepared->dominant_plane_depth == finest_depth

@@ -191,8 +191,9 @@ struct RegistrationResult {
   // sensor-aligned check's: check_sensor_aligned_answers), "round_axis" (its third on
   // object-scale trees without near-symmetries, search_round_axis_start) or "symmetric" (its
   // third on those with, try_symmetric_starts); and how many starts were refined for this pair
-  // (1-4 on scene-scale trees, 1-3 on object-scale ones; 0 when the pipeline stopped before
-  // refining: the network's output not finite).
+  // (1-5 on scene-scale trees, 1-3 on object-scale ones; in mode refine 1, or 2 when the
+  // sensor-aligned check refined another start to doubt the answer; 0 when the pipeline stopped
+  // before refining: the network's output not finite).
   std::string start = "network";
   int starts = 0;
   RegistrationTimings timings;
@@ -219,9 +220,10 @@ class NetTargetEncoding;  // core/net/rpsr_net.h
 // pair's network time with two passes; registrar_bench, BM_RegisterObjectsPreparedTarget) and the
 // refinement's target side (PreparedRefinementTarget: its cell indexes and node shapes; ~0.1-0.2
 // ms of an object pair's refinement, ~1.3 ms of a 120k-point scan's) and an object-scale target's
-// near-symmetries (~0.3-0.5 ms an object pair on the AVX2 host). Immutable and safe to share
-// across threads; valid with the Registrar that made it, for the tree it was made from (which must
-// outlive it).
+// near-symmetries (~0.3-0.5 ms an object pair on the AVX2 host), or a scene-scale target's
+// dominant plane (~0.15 ms a scan pair where the sensor-aligned check runs). Immutable and safe to
+// share across threads; valid with the Registrar that made it, for the tree it was made from (which
+// must outlive it).
 class PreparedTarget {
  public:
   const Octree& tree() const { return *tree_; }
@@ -231,6 +233,8 @@ class PreparedTarget {
   // refinement's side (for the registrar's default TreeRefinementOptions; a request with another
   // min_count_for_covariance prepares its own).
   bool has_net_encoding() const { return net_encoding != nullptr; }
+  // A scene-scale target's dominant plane (its ground), which the sensor-aligned check reads.
+  bool has_dominant_plane() const { return dominant_plane.has_value(); }
 
  private:
   friend class Registrar;

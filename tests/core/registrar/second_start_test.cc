@@ -211,6 +211,7 @@ TEST(RegistrarSecondStartTest, SensorAlignedCheckFindsTheMotionOfSlidScans) {
     // A prepared target holds its plane: the same answer.
     auto prepared = SharedRegistrar().PrepareTarget(target);
     ASSERT_TRUE(prepared.ok()) << prepared.status();
+    EXPECT_TRUE((*prepared)->has_dominant_plane());
     auto from_prepared = SharedRegistrar().Register(source, **prepared);
     ASSERT_TRUE(from_prepared.ok());
     EXPECT_EQ(from_prepared->start, "structure");
