@@ -105,6 +105,10 @@ RegistrationResult FromProto(const rpsr::v1::RegistrationResult& in) {
   out.line_normals_from_planes = in.line_normals_from_planes();
   out.surface_scatter_cells = in.surface_scatter_cells();
   out.noise_polished = in.noise_polished();
+  if (in.has_structure_alternative_transform_target_source()) {
+    out.structure_alternative_T_target_source =
+        FromProto(in.structure_alternative_transform_target_source());
+  }
   out.net_T_target_source = FromProto(in.net_transform_target_source());
   out.net_score_peak = in.net_score_peak();
   out.start = in.start();

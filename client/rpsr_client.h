@@ -214,6 +214,9 @@ struct RegistrationResult {
   // measured) and whether the noise polish ran (proto RegistrationResult).
   double surface_scatter_cells = -1.0;
   bool noise_polished = false;
+  // Mode refine, a doubted answer: the pose that fits the structure off the ground clearly better
+  // (proto RegistrationResult.structure_alternative_transform_target_source).
+  std::optional<Eigen::Isometry3d> structure_alternative_T_target_source;
   Eigen::Isometry3d net_T_target_source = Eigen::Isometry3d::Identity();
   double net_score_peak = 0.0;
   std::string mode;

@@ -144,6 +144,12 @@ void ResultToProto(const core::RegistrationResult& result, v1::RegistrationResul
   proto->set_line_normals_from_planes(result.line_normals_from_planes);
   proto->set_surface_scatter_cells(result.surface_scatter_cells);
   proto->set_noise_polished(result.noise_polished);
+  if (result.structure_alternative_T_target_source.has_value()) {
+    TransformToProto(*result.structure_alternative_T_target_source,
+                     proto->mutable_structure_alternative_transform_target_source());
+  } else {
+    proto->clear_structure_alternative_transform_target_source();
+  }
   proto->set_num_degenerate(result.num_degenerate);
   TransformToProto(result.net_T_target_source, proto->mutable_net_transform_target_source());
   proto->set_net_score_peak(result.net_score_peak);

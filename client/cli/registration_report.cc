@@ -68,6 +68,7 @@ PairReport ReportOf(const core::RegistrationResult& result, double seconds) {
   report.line_normals_from_planes = result.line_normals_from_planes;
   report.surface_scatter_cells = result.surface_scatter_cells;
   report.noise_polished = result.noise_polished;
+  report.structure_alternative = result.structure_alternative_T_target_source;
   report.seconds = seconds;
   return report;
 }
@@ -89,6 +90,7 @@ PairReport ReportOf(const RegistrationResult& result) {
   report.line_normals_from_planes = result.line_normals_from_planes;
   report.surface_scatter_cells = result.surface_scatter_cells;
   report.noise_polished = result.noise_polished;
+  report.structure_alternative = result.structure_alternative_T_target_source;
   report.seconds = result.round_trip_seconds;
   return report;
 }
@@ -188,6 +190,12 @@ std::string FormatReportJson(const PairReport& report) {
       ", \"surface_scatter_cells\": ", absl::StrFormat("%.6g", report.surface_scatter_cells),
       ", \"noise_polished\": ", report.noise_polished ? "true" : "false",
       ", \"seconds\": ", absl::StrFormat("%.6f", report.seconds));
+  if (report.structure_alternative) {
+    const Eigen::Matrix<double, 3, 3, Eigen::RowMajor> Ra = report.structure_alternative->linear();
+    const Eigen::Vector3d ta = report.structure_alternative->translation();
+    absl::StrAppend(&out, ", \"structure_alternative\": {\"rotation\": ", JsonNumbers(Ra.data(), 9),
+                    ", \"translation\": ", JsonNumbers(ta.data(), 3), "}");
+  }
   if (report.truth) {
     const core::PairError error = core::ErrorOf(report.T_target_source, *report.truth);
     absl::StrAppendFormat(&out, ", \"rotation_error_deg\": %.9g, \"translation_error\": %.9g",

@@ -35,6 +35,8 @@ struct PairReport {
   bool line_normals_from_planes = false;  // the line rule that ran (as asked, or as chosen)
   double surface_scatter_cells = -1.0;    // negative: not measured
   bool noise_polished = false;
+  // Mode refine, a doubted answer: the pose the structure off the ground prefers.
+  std::optional<Eigen::Isometry3d> structure_alternative;
   double seconds = 0.0;  // wall time of the registration as the caller saw it
   // Against a known truth, when there is one.
   std::optional<Eigen::Isometry3d> truth;

@@ -537,6 +537,7 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
       best_closeness.reset();
     } else if (structure.has_value()) {
       result.confidence = std::min(result.confidence, confidence.degenerate_cap);
+      result.structure_alternative_T_target_source = structure->refined.T_target_source;
       const Eigen::Vector3d t = structure->refined.T_target_source.translation();
       absl::StrAppend(&result.failure_reason, result.failure_reason.empty() ? "" : "; ",
                       absl::StrFormat("doubted: the structure off the ground plane fits "

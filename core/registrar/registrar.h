@@ -178,6 +178,10 @@ struct RegistrationResult {
   // noise_polished); -1 and false when not measured (mode kNet among others).
   double surface_scatter_cells = -1.0;
   bool noise_polished = false;
+  // Mode refine, an answer doubted by the sensor-aligned check (check_sensor_aligned_answers): the
+  // pose its other start refined to, which leaves clearly fewer of the structure's nodes off the
+  // ground without a partner. The answer stays the caller's start refined, its confidence capped.
+  std::optional<Eigen::Isometry3d> structure_alternative_T_target_source;
   // The network's estimate before refinement (identity / the initial guess in mode kRefine) and
   // its mean peak score (an input of the confidence).
   Eigen::Isometry3d net_T_target_source = Eigen::Isometry3d::Identity();

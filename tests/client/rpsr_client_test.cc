@@ -26,6 +26,7 @@
 #include "core/data/pair_manifest.h"
 #include "core/data/registration_metrics.h"
 #include "core/io/point_cloud_io.h"
+#include "core/registrar/confidence_calibration.h"
 #include "core/synth/lidar_sequence.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
@@ -305,6 +306,37 @@ TEST_F(RpsrClientTest, DegenerateAnswersHoldTheGuessAlongTheCorridor) {
       (*session)->Register(source.points, target.points, options);
   ASSERT_TRUE(free.ok()) << free.status();
   EXPECT_FALSE(free->held_at_initial);
+}
+
+// Mode refine's doubt reaches the caller: a held-out parking-lot pair 5 frames apart (7 m) whose
+// refine answer slides to where the two sensors meet comes back valid, capped, with the reason and
+// the pose the structure off the ground prefers (the motion itself); without the check, neither.
+TEST_F(RpsrClientTest, DoubtedRefineAnswersCarryThePoseTheStructurePrefers) {
+  absl::StatusOr<core::RegistrationPair> pair = core::CalibrationLidarPairs(5003, 5)(26);
+  ASSERT_TRUE(pair.ok()) << pair.status();
+  std::unique_ptr<Client> client = Connect();
+  absl::StatusOr<std::unique_ptr<Session>> session = client->CreateSession(TreeDepth(9));
+  ASSERT_TRUE(session.ok()) << session.status();
+  RegisterOptions options;
+  options.mode = "refine";
+  absl::StatusOr<RegistrationResult> doubted =
+      (*session)->Register(pair->source.points, pair->target.points, options);
+  ASSERT_TRUE(doubted.ok()) << doubted.status();
+  EXPECT_TRUE(doubted->valid);
+  EXPECT_LE(doubted->confidence, 0.05);
+  EXPECT_THAT(doubted->failure_reason, HasSubstr("doubted"));
+  ASSERT_TRUE(doubted->structure_alternative_T_target_source.has_value());
+  const core::PairError error =
+      core::ErrorOf(*doubted->structure_alternative_T_target_source, pair->T_target_source);
+  EXPECT_LT(error.rotation_deg, 1.0);
+  EXPECT_LT(error.translation, 0.3);
+  options.sensor_aligned_check = false;
+  absl::StatusOr<RegistrationResult> trusted =
+      (*session)->Register(pair->source.points, pair->target.points, options);
+  ASSERT_TRUE(trusted.ok()) << trusted.status();
+  EXPECT_GT(trusted->confidence, 0.9) << "no longer a confident slide; pick another pair";
+  EXPECT_FALSE(trusted->structure_alternative_T_target_source.has_value());
+  EXPECT_TRUE(trusted->failure_reason.empty()) << trusted->failure_reason;
 }
 
 // RegisterOptions::line_normals_from_planes reaches the server when given, and the rule that ran

@@ -229,6 +229,14 @@ TEST(ProtoConvertTest, ResultCarriesEverythingTheRegistrarSays) {
   EXPECT_EQ(proto.timings().refine_seconds(), 0.004);
   EXPECT_EQ(proto.start(), "searched");
   EXPECT_EQ(proto.starts(), 3u);
+  EXPECT_FALSE(proto.has_structure_alternative_transform_target_source());
+  // A doubted answer's alternative pose travels with it.
+  result.structure_alternative_T_target_source =
+      Eigen::Isometry3d(Eigen::Translation3d(-7.4, 0.1, 0.0));
+  ResultToProto(result, &proto);
+  ASSERT_TRUE(proto.has_structure_alternative_transform_target_source());
+  ASSERT_EQ(proto.structure_alternative_transform_target_source().translation_size(), 3);
+  EXPECT_EQ(proto.structure_alternative_transform_target_source().translation(0), -7.4);
 }
 
 TEST(ProtoConvertTest, StatusCodesAndMessagesPassThrough) {

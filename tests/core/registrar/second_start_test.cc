@@ -232,7 +232,14 @@ TEST(RegistrarSecondStartTest, SensorAlignedCheckFindsTheMotionOfSlidScans) {
       EXPECT_TRUE(c->valid);
       EXPECT_LE(c->confidence, 0.05);
       EXPECT_THAT(c->failure_reason, HasSubstr("doubted"));
+      // The pose the structure prefers is the motion itself.
+      ASSERT_TRUE(c->structure_alternative_T_target_source.has_value());
+      const PairError alternative =
+          ErrorOf(*c->structure_alternative_T_target_source, pair->T_target_source);
+      EXPECT_LT(alternative.rotation_deg, 1.0);
+      EXPECT_LT(alternative.translation, 0.3);
     }
+    EXPECT_FALSE(d->structure_alternative_T_target_source.has_value());
   }
 }
 
@@ -255,6 +262,7 @@ TEST(RegistrarSecondStartTest, SensorAlignedCheckLeavesRightRefineAnswersAlone) 
     SCOPED_TRACE(testing::Message() << "pair " << index);
     EXPECT_GT(c->confidence, 0.5);
     EXPECT_THAT(c->failure_reason, Not(HasSubstr("doubted")));
+    EXPECT_FALSE(c->structure_alternative_T_target_source.has_value());
     ++checked;
   }
   EXPECT_GE(checked, 6) << "mode refine misses these pairs; pick others";
