@@ -80,8 +80,8 @@ struct RegistrationOptions {
   // does not hold every motion of 10 m: on 64 simulated LiDAR pairs 10 frames apart recall at
   // (1 deg, 0.3 m) went 0.781 -> 0.938, on 64 pairs 5 frames apart it stayed 1.000. When the
   // answer is still not confident, the same search over every turn about z (9-degree steps, ~5
-  // ms) gives one more start, refined when it turns beyond +-20 degrees (a vehicle turning at a
-  // junction: 40-70 degrees in 10 frames).
+  // ms) gives one more start, refined when it turns beyond +-20 degrees and scores 1.5 times the
+  // narrower search's best (a vehicle turning at a junction: 40-70 degrees in 10 frames).
   bool search_scene_start = true;
   // net+refine on object-scale trees (experimental, off by default): when the target has
   // near-symmetries (FindSelfSymmetries, core/refine/symmetry_starts.h: a gear's teeth), the
