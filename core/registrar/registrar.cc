@@ -526,11 +526,11 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   // must be valid and leave clearly fewer structure nodes without a partner (kStructureFarDrop).
   // net+refine takes it as its answer; mode refine, whose answer is the caller's start refined,
   // keeps its answer and reports it as doubted (its confidence capped), naming the other pose.
-  const bool refine_only = options.mode == RegistrationMode::kRefine;
   // Mode refine doubts valid answers only (an invalid one reads 0 already); neither mode checks
   // when the caller asked for evaluation without updates.
-  if (options.check_sensor_aligned_answers && !refinement.evaluate_only &&
-      (net_refine ? best.valid || best.num_degenerate > 0 : refine_only && best.valid) &&
+  const bool checked = net_refine ? best.valid || best.num_degenerate > 0
+                                  : options.mode == RegistrationMode::kRefine && best.valid;
+  if (options.check_sensor_aligned_answers && !refinement.evaluate_only && checked &&
       IsDeepPair(source, target, refinement)) {
     const DominantPlane* prepared_plane = prepared != nullptr &&
                                                   prepared->dominant_plane.has_value() &&

@@ -333,16 +333,20 @@ BENCHMARK(BM_RegisterLidarCoarseOneCell)
     ->Arg(static_cast<int>(RegistrationMode::kRefine))
     ->Unit(benchmark::kMillisecond);
 
-// The sensor-aligned check's cost where it runs: `check` 1 (the default) or 0.
+// The sensor-aligned check's rows: net+refine and refine, each with `check` 1 (the default) or 0.
+void ModesWithAndWithoutTheCheck(benchmark::internal::Benchmark* b) {
+  b->ArgNames({"mode", "check"});
+  for (RegistrationMode mode : {RegistrationMode::kNetRefine, RegistrationMode::kRefine}) {
+    for (int check : {1, 0}) b->Args({static_cast<int>(mode), check});
+  }
+}
+
+// The sensor-aligned check's cost where it runs.
 void BM_RegisterLidarSensorAlignedSlide(benchmark::State& state) {
   RunRegister(state, SensorAlignedSlideTrees(), false, SharedRegistrar(), {}, state.range(1) != 0);
 }
 BENCHMARK(BM_RegisterLidarSensorAlignedSlide)
-    ->ArgNames({"mode", "check"})
-    ->Args({static_cast<int>(RegistrationMode::kNetRefine), 1})
-    ->Args({static_cast<int>(RegistrationMode::kNetRefine), 0})
-    ->Args({static_cast<int>(RegistrationMode::kRefine), 1})
-    ->Args({static_cast<int>(RegistrationMode::kRefine), 0})
+    ->Apply(ModesWithAndWithoutTheCheck)
     ->Unit(benchmark::kMillisecond);
 
 // The headline pairs (about 3 m apart, within a search cell: the check classifies and searches)
@@ -359,11 +363,7 @@ void BM_RegisterLidarSlowMotion(benchmark::State& state) {
   RunRegister(state, SlowMotionLidarTrees(), false, SharedRegistrar(), {}, state.range(1) != 0);
 }
 BENCHMARK(BM_RegisterLidarSlowMotion)
-    ->ArgNames({"mode", "check"})
-    ->Args({static_cast<int>(RegistrationMode::kNetRefine), 1})
-    ->Args({static_cast<int>(RegistrationMode::kNetRefine), 0})
-    ->Args({static_cast<int>(RegistrationMode::kRefine), 1})
-    ->Args({static_cast<int>(RegistrationMode::kRefine), 0})
+    ->Apply(ModesWithAndWithoutTheCheck)
     ->Unit(benchmark::kMillisecond);
 
 // What a junction's turn costs net+refine: every start, the search over every turn included.
