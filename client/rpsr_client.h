@@ -146,9 +146,9 @@ struct RegisterOptions {
   // the network's start is not confident; search a start about z on scene-scale trees.
   bool refine_from_initial = true;
   bool search_scene_start = true;
-  // Experimental: refine the answer turned by the target's near-symmetry too (proto
-  // RegisterOptions.symmetric_starts).
-  bool symmetric_starts = false;
+  // Refine the answer turned by the target's near-symmetry under which the features that break
+  // it meet (a gear's pin) too (proto RegisterOptions.symmetric_starts).
+  bool symmetric_starts = true;
   // Refine the answer turned about the target's round axis too, when not confident (proto
   // RegisterOptions.round_axis_start).
   bool round_axis_start = true;

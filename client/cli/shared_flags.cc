@@ -64,10 +64,10 @@ ABSL_FLAG(bool, sensor_aligned_check, true,
           "also refine from a search scored on the structure off the ground and keep it when it "
           "leaves clearly fewer structure nodes without a partner (mode refine: keep the answer "
           "but report it doubted, its confidence capped)");
-ABSL_FLAG(bool, symmetric_starts, false,
-          "eval, register, odometry, bench, net+refine on object-scale trees (experimental): "
-          "when the target has near-symmetries (a gear's teeth), also refine the answer turned "
-          "by the one that leaves the fewest nodes without a partner");
+ABSL_FLAG(bool, symmetric_starts, true,
+          "eval, register, odometry, bench, net+refine on object-scale trees: when the target "
+          "has near-symmetries (a gear's teeth), also refine the answer turned by the one under "
+          "which the features that break them (a gear's pin) meet clearly better");
 ABSL_FLAG(
     bool, rebin_coarse_depths, true,
     "eval, register, odometry, bench (refining modes): the refinement's coarse depths compare the "

@@ -27,11 +27,11 @@ constexpr std::array<std::array<int, 3>, 27> kHomeFirst = [] {
   return cells;
 }();
 
-// Calls visit(pose index, distance capped at kCapCells cells) for each sampled source node under
-// each pose (the target's lookup built once for all) and returns the cell edge; 0 when nothing
-// can be measured (MeanNodeDistanceCells' negative cases). `stop_below` (metres, > 0): a node's
-// search ends at the first partner that near, and the distance visited is then that partner's
-// (enough to tell near from far; 0: the exact nearest distance).
+// Calls visit(pose index, source node index, distance capped at kCapCells cells) for each sampled
+// source node under each pose (the target's lookup built once for all) and returns the cell edge; 0
+// when nothing can be measured (MeanNodeDistanceCells' negative cases). `stop_below` (metres, > 0):
+// a node's search ends at the first partner that near, and the distance visited is then that
+// partner's (enough to tell near from far; 0: the exact nearest distance).
 template <typename Visit>
 double VisitNodeDistances(const Octree& source, const Octree& target,
                           const std::vector<Eigen::Isometry3d>& poses, int depth,
@@ -93,7 +93,7 @@ double VisitNodeDistances(const Octree& source, const Octree& target,
       const size_t node = kept.empty() ? stride : kept[stride];
       const Eigen::Vector3d q = T_target_source * s.center_of_mass[node].cast<double>();
       if (!q.allFinite()) {  // a non-finite pose: no partner (and no undefined integer cast)
-        visit(pose, cap);
+        visit(pose, node, cap);
         continue;
       }
       std::array<int64_t, 3> home;
@@ -123,7 +123,7 @@ double VisitNodeDistances(const Octree& source, const Octree& target,
         }
         if (best2 <= stop2) break;
       }
-      visit(pose, std::sqrt(best2));
+      visit(pose, node, std::sqrt(best2));
     }
   }
   return edge;
@@ -137,7 +137,7 @@ double MeanNodeDistanceCells(const Octree& source, const Octree& target,
   double sum = 0.0;
   size_t nodes = 0;
   const double edge = VisitNodeDistances(source, target, {T_target_source}, depth, options,
-                                         [&](size_t, double distance) {
+                                         [&](size_t, size_t, double distance) {
                                            sum += distance;
                                            ++nodes;
                                          });
@@ -155,7 +155,7 @@ std::vector<double> FarNodeFractions(const Octree& source, const Octree& target,
   std::vector<size_t> nodes(poses.size(), 0);
   const double edge = VisitNodeDistances(
       source, target, poses, depth, options,
-      [&](size_t pose, double distance) {
+      [&](size_t pose, size_t, double distance) {
         far[pose] += distance > far_distance;
         ++nodes[pose];
       },
@@ -165,6 +165,27 @@ std::vector<double> FarNodeFractions(const Octree& source, const Octree& target,
     fractions[pose] = static_cast<double>(far[pose]) / static_cast<double>(nodes[pose]);
   }
   return fractions;
+}
+
+std::vector<uint8_t> NodesFarUnderAllButFewPoses(const Octree& source, const Octree& target,
+                                                 const std::vector<Eigen::Isometry3d>& poses,
+                                                 int depth, double far_cells, int max_near) {
+  if (depth < 1 || depth > source.max_depth() || depth > target.max_depth() || poses.empty()) {
+    return {};
+  }
+  const size_t nodes = source.level(depth).size();
+  NodeClosenessOptions every_node;
+  every_node.max_source_nodes = nodes;
+  const double far_distance = far_cells * CellEdge(target, depth);
+  std::vector<int> near_under(nodes, 0);
+  const double edge = VisitNodeDistances(
+      source, target, poses, depth, every_node,
+      [&](size_t, size_t node, double distance) { near_under[node] += distance <= far_distance; },
+      far_distance);
+  if (!(edge > 0.0)) return {};
+  std::vector<uint8_t> marked(nodes, 0);
+  for (size_t i = 0; i < nodes; ++i) marked[i] = near_under[i] <= max_near;
+  return marked;
 }
 
 }  // namespace rpsr::core

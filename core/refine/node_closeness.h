@@ -59,6 +59,16 @@ std::vector<double> FarNodeFractions(const Octree& source, const Octree& target,
                                      const std::vector<Eigen::Isometry3d>& poses, int depth,
                                      double far_cells, const NodeClosenessOptions& options = {});
 
+// Marks (1) each node of the source's `depth` that lies farther than `far_cells` (below kCapCells)
+// from every target CoM of `depth` under all but at most `max_near` of the poses; every node is
+// visited (no sampling). With the poses a target's near-symmetries, the marked nodes are the
+// feature that breaks the symmetry (a gear's pin, symmetry_starts.h): a node left without a
+// partner by sampling alone is rarely left so under nearly every turn. Empty where nothing can
+// be measured (as MeanNodeDistanceCells) or without poses.
+std::vector<uint8_t> NodesFarUnderAllButFewPoses(const Octree& source, const Octree& target,
+                                                 const std::vector<Eigen::Isometry3d>& poses,
+                                                 int depth, double far_cells, int max_near);
+
 }  // namespace rpsr::core
 
 #endif  // RPSR_CORE_REFINE_NODE_CLOSENESS_H_

@@ -231,4 +231,79 @@ std::optional<SymmetricTwin> BestSymmetricTwin(const Octree& source, const Octre
   return best;
 }
 
+BreakingNodes FindBreakingNodes(const Octree& source, const Octree& target,
+                                const Eigen::Isometry3d& answer,
+                                const std::vector<SelfSymmetry>& symmetries,
+                                const SelfSymmetryOptions& options) {
+  BreakingNodes breaking;
+  if (symmetries.empty()) return breaking;
+  breaking.depth = SymmetryDepth(source, target);
+  // A node is far from the target turned by S when S^-1 of it is far from the target; the turns
+  // are a group (each one's inverse among them), so the turns themselves serve as poses.
+  std::vector<Eigen::Isometry3d> turns;
+  std::vector<Eigen::Isometry3d> moved = {answer};
+  for (const SelfSymmetry& symmetry : symmetries) {
+    turns.push_back(symmetry.S);
+    moved.push_back(symmetry.S.inverse() * answer);
+  }
+  breaking.target = NodesFarUnderAllButFewPoses(target, target, turns, breaking.depth,
+                                                options.far_cells, options.breaking_max_turns_near);
+  // The source's pin meets the target's pin under one of the group's turns: one more allowed.
+  breaking.source =
+      NodesFarUnderAllButFewPoses(source, target, moved, breaking.depth, options.far_cells,
+                                  options.breaking_max_turns_near + 1);
+  return breaking;
+}
+
+std::vector<double> BreakingNodeMatches(const Octree& source, const Octree& target,
+                                        const BreakingNodes& breaking,
+                                        const std::vector<Eigen::Isometry3d>& poses,
+                                        const SelfSymmetryOptions& options) {
+  std::vector<double> matches(poses.size(), -1.0);
+  const auto any = [](const std::vector<uint8_t>& marks) {
+    return std::find(marks.begin(), marks.end(), 1) != marks.end();
+  };
+  if (!any(breaking.target) || !any(breaking.source)) return matches;
+  // From the target's breaking nodes into the source's frame: the target's are the feature
+  // itself (its cloud undisturbed); the source's may also hold a disturbance's strays.
+  std::vector<Eigen::Isometry3d> inverses;
+  inverses.reserve(poses.size());
+  for (const Eigen::Isometry3d& T : poses) inverses.push_back(T.inverse());
+  NodeClosenessOptions marked;
+  marked.source_nodes = &breaking.target;
+  marked.target_nodes = &breaking.source;
+  marked.max_source_nodes = breaking.target.size();
+  const std::vector<double> far = FarNodeFractions(target, source, inverses, breaking.depth,
+                                                   options.breaking_match_cells, marked);
+  for (size_t k = 0; k < poses.size(); ++k) {
+    if (far[k] >= 0.0) matches[k] = 1.0 - far[k];
+  }
+  return matches;
+}
+
+std::optional<BreakingNodeTwin> TwinMatchingBreakingNodes(
+    const Octree& source, const Octree& target, const Eigen::Isometry3d& answer,
+    const std::vector<SelfSymmetry>& symmetries, const BreakingNodes& breaking,
+    const SelfSymmetryOptions& options) {
+  if (symmetries.empty()) return std::nullopt;
+  std::vector<Eigen::Isometry3d> poses = {answer};
+  for (const SelfSymmetry& symmetry : symmetries) poses.push_back(symmetry.S * answer);
+  const std::vector<double> matches = BreakingNodeMatches(source, target, breaking, poses, options);
+  if (matches.front() < 0.0) return std::nullopt;
+  size_t best = 0;
+  for (size_t k = 1; k < matches.size(); ++k) {
+    if (matches[k] > matches[best]) best = k;
+  }
+  if (best == 0 || matches[best] < matches.front() + options.min_breaking_match_gain) {
+    return std::nullopt;
+  }
+  // And no other twin may match as well: where a disturbance's strays meet the target's few
+  // breaking nodes by chance (40% outliers), two twins can both match all of them, and nothing
+  // then tells which is right.
+  for (size_t k = 1; k < matches.size(); ++k) {
+    if (k != best && matches[k] >= matches[best]) return std::nullopt;
+  }
+  return BreakingNodeTwin{poses[best], matches[best], matches.front()};
+}
+
 }  // namespace rpsr::core

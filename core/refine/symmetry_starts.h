@@ -17,6 +17,7 @@
 #ifndef RPSR_CORE_REFINE_SYMMETRY_STARTS_H_
 #define RPSR_CORE_REFINE_SYMMETRY_STARTS_H_
 
+#include <cstdint>
 #include <optional>
 #include <vector>
 
@@ -55,6 +56,18 @@ struct SelfSymmetryOptions {
   // this fraction of the target's cube half-length (where they place the source's CoM).
   double twin_tolerance_deg = 5.0;
   double twin_tolerance_rel = 0.05;
+  // A node breaks the symmetry when it lies farther than far_cells from every node of the target
+  // turned by each of its near-symmetries but at most this many (NodesFarUnderAllButFewPoses): a
+  // gear's pin beyond its face, 2-16 of ~800 nodes at depth 5 on the unseen gears. One, so that a
+  // sampling gap or a stray near one turned copy does not hide a pin's node.
+  int breaking_max_turns_near = 1;
+  // A target breaking node is matched under a pose when a source breaking node lies within this
+  // many cells of it.
+  double breaking_match_cells = 1.5;
+  // The twin is taken when it matches at least this fraction more of the target's breaking
+  // nodes than the answer. On the unseen gears (seeds 1-3, clean) the right tooth matched
+  // 0.62-1.0 of them, every other tooth 0-0.43.
+  double min_breaking_match_gain = 0.5;
 };
 
 struct SelfSymmetry {
@@ -104,6 +117,48 @@ std::optional<double> SymmetricTwinMargin(const Octree& source, const Octree& ta
                                           const Eigen::Isometry3d& answer,
                                           const std::vector<SelfSymmetry>& symmetries,
                                           double far_cells);
+
+// The nodes that break the near-symmetries, at SymmetryDepth, per cloud (marks sized as that
+// depth's level; empty where nothing was measured). The target's are those its own turns leave
+// without a partner. The source's are those that, moved by the answer, lie far from the target
+// under every turn (the identity among them) but one: a pin lies on the target's pin under one
+// turn of the group, whichever twin the answer is, so one answer's breaking nodes serve all its
+// twins. Both are measured against the target, which is undisturbed: a source under outliers or
+// jitter, whose own symmetry may no longer be found, keeps its pin (and its strays, far from
+// every turn, are marked too; they rarely meet the target's few breaking nodes).
+struct BreakingNodes {
+  int depth = 0;
+  std::vector<uint8_t> source;
+  std::vector<uint8_t> target;
+};
+BreakingNodes FindBreakingNodes(const Octree& source, const Octree& target,
+                                const Eigen::Isometry3d& answer,
+                                const std::vector<SelfSymmetry>& symmetries,
+                                const SelfSymmetryOptions& options = {});
+
+// Per pose: the fraction of the target's breaking nodes that find a source breaking node within
+// breaking_match_cells (1 when the features that break the symmetry meet, near 0 a tooth off);
+// negative where it cannot be measured (no breaking node on either side).
+std::vector<double> BreakingNodeMatches(const Octree& source, const Octree& target,
+                                        const BreakingNodes& breaking,
+                                        const std::vector<Eigen::Isometry3d>& poses,
+                                        const SelfSymmetryOptions& options = {});
+
+struct BreakingNodeTwin {
+  Eigen::Isometry3d T_target_source = Eigen::Isometry3d::Identity();
+  double match = 0.0;         // of the twin (BreakingNodeMatches)
+  double answer_match = 0.0;  // of the answer
+};
+
+// Among S * answer for the given symmetries, the one whose breaking nodes meet best, when it
+// matches at least min_breaking_match_gain more than the answer and more than every other twin;
+// nullopt otherwise (or where the breaking nodes cannot be measured). Unlike BestSymmetricTwin's
+// count of every node left without a partner, where a pin's 2-3 far nodes drown in sampling's, it
+// looks only where the features are, so a tooth off reads 0 against the right tooth's ~1.
+std::optional<BreakingNodeTwin> TwinMatchingBreakingNodes(
+    const Octree& source, const Octree& target, const Eigen::Isometry3d& answer,
+    const std::vector<SelfSymmetry>& symmetries, const BreakingNodes& breaking,
+    const SelfSymmetryOptions& options = {});
 
 // Whether `a` is `b` turned by one of the symmetries (S * b, to within the options' tolerances).
 bool AreSymmetricTwins(const Octree& source, const Octree& target, const Eigen::Isometry3d& a,

@@ -90,6 +90,12 @@ bool Closer(double later_cells, double so_far_cells) {
          later_cells < (1.0 - kCloserBy) * so_far_cells;
 }
 
+// The symmetric start's twin is kept at up to this much less fitness than the answer: refined
+// from the right tooth, unseen gears fit 0.957-0.998 against their tooth-off answers' 0.987-1.000
+// (tests/bench/notes/refinement-notes.md, *Gears a tooth off*), so ClearlyBetter's one percent
+// would refuse the right tooth; its breaking nodes meeting decide instead.
+constexpr double kTwinFitnessSlack = 0.05;
+
 // The sensor-aligned check's margin: a searched answer replaces a sensor-aligned one when it
 // leaves this much less of the source's structure off the ground without a target partner within
 // a finest cell (OffPlaneFarFractions). Held-out LiDAR pairs 5 and 10 frames apart (pair seeds
@@ -572,21 +578,25 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
     }
   }
   // The symmetric start (RegistrationOptions::try_symmetric_starts): object-scale trees whose
-  // target has near-symmetries, whatever the confidence (a tooth off reads confident). The twin
-  // is kept when, refined, it still leaves clearly fewer source nodes without a partner and does
-  // not fit clearly worse; the other starts' rule would not take it (the twins fit alike).
-  // (`symmetries` is empty for scene-scale pairs.)
-  if (net_refine && options.try_symmetric_starts && best.valid) {
+  // target has near-symmetries, whatever the confidence (a tooth off can read confident). The
+  // twin whose symmetry-breaking nodes meet clearly better than the answer's is refined, and kept
+  // when, refined, they still meet clearly better and its fitness is within kTwinFitnessSlack; the
+  // other starts' rule would not take it (the twins fit alike). (`symmetries` is empty for
+  // scene-scale pairs.)
+  if (net_refine && options.try_symmetric_starts && best.valid && !symmetries.empty()) {
     const SelfSymmetryOptions symmetry_options;
-    if (std::optional<SymmetricTwin> twin =
-            BestSymmetricTwin(source, target, best.T_target_source, symmetries, symmetry_options)) {
+    const BreakingNodes breaking =
+        FindBreakingNodes(source, target, best.T_target_source, symmetries, symmetry_options);
+    if (std::optional<BreakingNodeTwin> twin = TwinMatchingBreakingNodes(
+            source, target, best.T_target_source, symmetries, breaking, symmetry_options)) {
       absl::StatusOr<TreeRefinementResult> r =
           RefineWithFallback(source, target, twin->T_target_source, refinement, cache);
       ++result.starts;
-      if (r.ok() && r->valid && !ClearlyBetter(best, *r)) {
-        const double far = TwoWayFarFraction(source, target, r->T_target_source, symmetry_options);
-        if (far >= 0.0 &&
-            far <= twin->answer_far_fraction - symmetry_options.min_far_fraction_drop) {
+      if (r.ok() && r->valid && r->fitness >= best.fitness - kTwinFitnessSlack) {
+        const double match =
+            BreakingNodeMatches(source, target, breaking, {r->T_target_source}, symmetry_options)
+                .front();
+        if (match >= twin->answer_match + symmetry_options.min_breaking_match_gain) {
           settle(*r, twin->T_target_source, result);
           result.start = "symmetric";
           best = *std::move(r);

@@ -164,16 +164,16 @@ TEST(ProtoConvertTest, LaterStartsAreOnUnlessTurnedOff) {
   EXPECT_TRUE(options->search_scene_start);
 }
 
-// The symmetric start is experimental: off unless a client turns it on.
-TEST(ProtoConvertTest, SymmetricStartsAreOffUnlessTurnedOn) {
+// The symmetric start is on (since session 29) unless a client turns it off.
+TEST(ProtoConvertTest, SymmetricStartsAreOnUnlessTurnedOff) {
   auto options = OptionsFromProto({});
   ASSERT_TRUE(options.ok());
-  EXPECT_FALSE(options->try_symmetric_starts);
+  EXPECT_TRUE(options->try_symmetric_starts);
   v1::RegisterOptions proto;
-  proto.set_symmetric_starts(true);
+  proto.set_symmetric_starts(false);
   options = OptionsFromProto(proto);
   ASSERT_TRUE(options.ok());
-  EXPECT_TRUE(options->try_symmetric_starts);
+  EXPECT_FALSE(options->try_symmetric_starts);
 }
 
 TEST(ProtoConvertTest, RoundAxisStartIsOnUnlessTurnedOff) {

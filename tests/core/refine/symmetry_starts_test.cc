@@ -1,12 +1,14 @@
-// FindSelfSymmetries and BestSymmetricTwin (core/refine/symmetry_starts.h): a gear's teeth are
-// found as turns about its axis, an object without a symmetry has none, and the feature that
-// breaks a gear's symmetry (its pin) leaves more nodes without a partner a tooth off than at the
-// truth.
+// FindSelfSymmetries, BestSymmetricTwin and the breaking nodes (core/refine/symmetry_starts.h): a
+// gear's teeth are found as turns about its axis, an object without a symmetry has none, the
+// feature that breaks a gear's symmetry (its pin) leaves more nodes without a partner a tooth off
+// than at the truth, and its nodes meet the other cloud's at the truth only.
 #include "core/refine/symmetry_starts.h"
 
 #include <cmath>
 #include <cstdio>
+#include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "Eigen/Eigenvalues"
@@ -113,6 +115,86 @@ TEST(SymmetryStartsTest, TheTwinMarginIsHigherAtTheTruthThanATurnOff) {
   EXPECT_FALSE(SymmetricTwinMargin(RefinementTree(sofa.source, 6), RefinementTree(sofa.target, 6),
                                    sofa.T_target_source, {}, 1.9)
                    .has_value());
+}
+
+// The nodes that break a gear's symmetry are its pin's: a few, together, off the disc; an object
+// without near-symmetries has none to find.
+TEST(SymmetryStartsTest, TheNodesThatBreakAGearsSymmetryAreItsPin) {
+  for (const ObjectPair& pair : PairsOf("gear", 3)) {
+    const Octree source = RefinementTree(pair.source, 6);
+    const Octree target = RefinementTree(pair.target, 6);
+    const std::vector<SelfSymmetry> found = FindSelfSymmetries(target);
+    ASSERT_FALSE(found.empty());
+    const BreakingNodes breaking = FindBreakingNodes(source, target, pair.T_target_source, found);
+    ASSERT_EQ(breaking.depth, 5);
+    for (const auto& [tree, marks] :
+         {std::pair{&source, &breaking.source}, std::pair{&target, &breaking.target}}) {
+      const Octree::Level& level = tree->level(breaking.depth);
+      ASSERT_EQ(marks->size(), level.size());
+      std::vector<Eigen::Vector3d> marked;
+      for (size_t i = 0; i < level.size(); ++i) {
+        if ((*marks)[i]) marked.push_back(level.center_of_mass[i].cast<double>());
+      }
+      // 2-16 of ~800 nodes on the unseen gears; a pin is 0.2-0.4 long on a unit-radius gear.
+      EXPECT_GE(marked.size(), 1u);
+      EXPECT_LE(marked.size(), 20u);
+      Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+      for (const Eigen::Vector3d& p : marked) mean += p / static_cast<double>(marked.size());
+      for (const Eigen::Vector3d& p : marked) {
+        EXPECT_LT((p - mean).norm(), 0.35 * tree->half_length());
+      }
+    }
+  }
+  const ObjectPair sofa = PairsOf("sofa", 1).front();
+  const BreakingNodes none = FindBreakingNodes(
+      RefinementTree(sofa.source, 6), RefinementTree(sofa.target, 6), sofa.T_target_source, {});
+  EXPECT_TRUE(none.source.empty() && none.target.empty());
+}
+
+// At the truth the pins meet; a tooth off (either way) they do not, and the twin search from there
+// returns the truth. From the truth it returns nothing. A disturbed source (20% outliers, which
+// hide its own symmetry) keeps its pin through the target's turns carried over by the answer.
+TEST(SymmetryStartsTest, TheTwinWhosePinsMeetIsTheTruth) {
+  for (const DisturbanceKind disturbance :
+       {DisturbanceKind::kNone, DisturbanceKind::kUniformOutliers}) {
+    PairOptions options;
+    options.split = ObjectSplit::kM2Unseen;
+    options.disturbance = disturbance;
+    options.disturbance_level = 3;
+    int gears = 0;
+    for (uint64_t i = 0; i < 400 && gears < 3; ++i) {
+      absl::StatusOr<ObjectPair> pair = MakeObjectPair(options, DeriveSeed(2, i));
+      ASSERT_TRUE(pair.ok()) << pair.status();
+      if (ShapeFamilies()[pair->family_index].name != "gear") continue;
+      ++gears;
+      const Octree source = RefinementTree(pair->source, 6);
+      const Octree target = RefinementTree(pair->target, 6);
+      const std::vector<SelfSymmetry> found = FindSelfSymmetries(target);
+      ASSERT_FALSE(found.empty());
+      const BreakingNodes at_truth =
+          FindBreakingNodes(source, target, pair->T_target_source, found);
+      EXPECT_FALSE(TwinMatchingBreakingNodes(source, target, pair->T_target_source, found, at_truth)
+                       .has_value())
+          << "pair " << i;
+      const double truth_match =
+          BreakingNodeMatches(source, target, at_truth, {pair->T_target_source}).front();
+      EXPECT_GE(truth_match, 0.6) << "pair " << i;
+      for (const SelfSymmetry& tooth : {found.front(), found.back()}) {
+        const Eigen::Isometry3d off = tooth.S * pair->T_target_source;
+        const BreakingNodes breaking = FindBreakingNodes(source, target, off, found);
+        EXPECT_LE(BreakingNodeMatches(source, target, breaking, {off}).front(), 0.2)
+            << "pair " << i << " turned " << tooth.angle_deg;
+        const std::optional<BreakingNodeTwin> twin =
+            TwinMatchingBreakingNodes(source, target, off, found, breaking);
+        ASSERT_TRUE(twin.has_value()) << "pair " << i << " turned " << tooth.angle_deg;
+        const Eigen::AngleAxisd rest(twin->T_target_source.linear() *
+                                     pair->T_target_source.linear().transpose());
+        EXPECT_LT(std::abs(rest.angle()) * 180.0 / M_PI, 1e-6) << "pair " << i;
+        EXPECT_GE(twin->match, twin->answer_match + SelfSymmetryOptions{}.min_breaking_match_gain);
+      }
+    }
+    EXPECT_EQ(gears, 3);
+  }
 }
 
 // A gear on a long round axle (a pulley on its shaft, a drill chuck): the axle's nodes lie near
