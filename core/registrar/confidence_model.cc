@@ -199,20 +199,29 @@ std::vector<double> ConfidenceFeatureVector(const ConfidenceInputs& in) {
   f[kFeatureSurfaceScatterCells] = std::max(refined.surface_scatter_cells, 0.0);
   f[kFeatureNoisePolished] = refined.noise_polished ? 1.0 : 0.0;
   // A near-symmetric object's answer (a gear a tooth off) fits as well by every measure above as
-  // its twin does; only the few nodes of the feature that breaks the symmetry tell them apart
-  // (symmetry_starts.h). On 220 unseen gear pairs (the ten-setting harness's settings, seeds
-  // 1-3), answers whose best twin left 0.4% more of the nodes without a partner within 1.9
-  // cells than the answer did were right 95% of the time, answers whose twin left 0.4% fewer
-  // 14% or less, at a confidence of ~0.6 either way (tests/bench/notes/confidence-notes.md). No
-  // twin (most objects, every scan): the ceiling, as a margin no twin comes near.
-  constexpr double kTwinMarginFloor = -0.05;
-  constexpr double kTwinMarginCeiling = 0.02;
-  f[kFeatureSymmetricTwinMargin] = kTwinMarginCeiling;
+  // its twin does; only the feature that breaks the symmetry (a gear's pin) tells them apart
+  // (symmetry_starts.h). The margin is how much more of the target's breaking nodes the answer's
+  // meet than its best twin's do (BreakingNodeMatches): on 220 unseen gear answers (the
+  // ten-setting harness's settings, seeds 1-3) those at 0.5 or more were right 95% of the time
+  // (the rest jittered pairs a translation off), those below -0.2 never, and the old fit read
+  // them all at ~0.3 (tests/bench/notes/confidence-notes.md, *The twin margin by the features
+  // that break the symmetry*). No near-symmetry (most objects, every scan): 1, as no twin comes
+  // near. Near-symmetries without a feature to find on both sides (a screwdriver's lobes, a pin
+  // cropped away): 0, the twins cannot be told apart.
+  f[kFeatureSymmetricTwinMargin] = 1.0;
   if (in.symmetries != nullptr && !in.symmetries->empty()) {
-    const std::optional<double> margin = SymmetricTwinMargin(
-        *in.source, *in.target, r.T_target_source, *in.symmetries, SelfSymmetryOptions{}.far_cells);
-    if (margin.has_value()) {
-      f[kFeatureSymmetricTwinMargin] = std::clamp(*margin, kTwinMarginFloor, kTwinMarginCeiling);
+    f[kFeatureSymmetricTwinMargin] = 0.0;
+    const BreakingNodes breaking =
+        FindBreakingNodes(*in.source, *in.target, r.T_target_source, *in.symmetries);
+    std::vector<Eigen::Isometry3d> poses = {r.T_target_source};
+    for (const SelfSymmetry& symmetry : *in.symmetries) {
+      poses.push_back(symmetry.S * r.T_target_source);
+    }
+    const std::vector<double> matches =
+        BreakingNodeMatches(*in.source, *in.target, breaking, poses);
+    if (matches.front() >= 0.0) {
+      const double best_twin = *std::max_element(matches.begin() + 1, matches.end());
+      f[kFeatureSymmetricTwinMargin] = matches.front() - best_twin;
     }
   }
   f[kFeatureTurnContrast] = TurnContrast(*in.source, *in.target, r.T_target_source);

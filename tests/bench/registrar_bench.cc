@@ -6,10 +6,12 @@
 // the embedded objects-small model (core/models/objects-small: a quarter of the default's
 // convolution FLOPs) and report an error when it is not embedded. The *SensorAlignedSlide and
 // *SlowMotion rows time net+refine and refine with and without the sensor-aligned check on
-// held-out pairs where it runs (refine: the check doubts the slides, refining the other start).
+// held-out pairs where it runs (refine: the check doubts the slides, refining the other start);
+// the *Gears rows net+refine with and without the symmetric start on gears, where it runs.
 //
 //   OMP_WAIT_POLICY=PASSIVE build/tests/bench/registrar_bench --benchmark_counters_tabular=true
 #include <cstdlib>
+#include <functional>
 #include <map>
 #include <memory>
 #include <string>
@@ -18,6 +20,7 @@
 #include "benchmark/benchmark.h"
 #include "core/data/object_pairs.h"
 #include "core/net/rpsr_net.h"
+#include "core/refine/symmetry_starts.h"
 #include "core/registrar/confidence_calibration.h"
 #include "core/registrar/embedded_models.h"
 #include "core/registrar/registrar.h"
@@ -125,14 +128,15 @@ const TreePairs& JunctionTurnLidarTrees() {
 // `prepared`: each target prepared once beforehand (Registrar::PrepareTarget), as a caller that
 // registers many sources against one reference would; the preparation is not timed.
 // `refinement`: the refinement's options (the *FinestAlone and *CoarseOneCell rows turn one of its
-// choices off to measure what it costs).
+// choices off to measure what it costs). `adjust`: other options a row turns off (a later start).
 void RunRegister(benchmark::State& state, const TreePairs& trees, bool prepared = false,
                  const Registrar& registrar = SharedRegistrar(),
-                 const TreeRefinementOptions& refinement = {}, bool sensor_aligned_check = true) {
+                 const TreeRefinementOptions& refinement = {},
+                 const std::function<void(RegistrationOptions&)>& adjust = {}) {
   RegistrationOptions options;
-  options.check_sensor_aligned_answers = sensor_aligned_check;
   options.mode = static_cast<RegistrationMode>(state.range(0));
   options.refinement = refinement;
+  if (adjust) adjust(options);
   std::vector<std::shared_ptr<const PreparedTarget>> targets;
   for (size_t i = 0; prepared && i < trees.size(); ++i) {
     auto target = registrar.PrepareTarget(trees.trees[2 * i + 1]);
@@ -334,6 +338,10 @@ BENCHMARK(BM_RegisterLidarCoarseOneCell)
     ->Unit(benchmark::kMillisecond);
 
 // The sensor-aligned check's rows: net+refine and refine, each with `check` 1 (the default) or 0.
+std::function<void(RegistrationOptions&)> CheckSensorAlignedAnswers(bool check) {
+  return [check](RegistrationOptions& options) { options.check_sensor_aligned_answers = check; };
+}
+
 void ModesWithAndWithoutTheCheck(benchmark::internal::Benchmark* b) {
   b->ArgNames({"mode", "check"});
   for (RegistrationMode mode : {RegistrationMode::kNetRefine, RegistrationMode::kRefine}) {
@@ -343,7 +351,8 @@ void ModesWithAndWithoutTheCheck(benchmark::internal::Benchmark* b) {
 
 // The sensor-aligned check's cost where it runs.
 void BM_RegisterLidarSensorAlignedSlide(benchmark::State& state) {
-  RunRegister(state, SensorAlignedSlideTrees(), false, SharedRegistrar(), {}, state.range(1) != 0);
+  RunRegister(state, SensorAlignedSlideTrees(), false, SharedRegistrar(), {},
+              CheckSensorAlignedAnswers(state.range(1) != 0));
 }
 BENCHMARK(BM_RegisterLidarSensorAlignedSlide)
     ->Apply(ModesWithAndWithoutTheCheck)
@@ -352,7 +361,7 @@ BENCHMARK(BM_RegisterLidarSensorAlignedSlide)
 // The headline pairs (about 3 m apart, within a search cell: the check classifies and searches)
 // without it.
 void BM_RegisterLidarNoSensorAlignedCheck(benchmark::State& state) {
-  RunRegister(state, LidarTrees(), false, SharedRegistrar(), {}, false);
+  RunRegister(state, LidarTrees(), false, SharedRegistrar(), {}, CheckSensorAlignedAnswers(false));
 }
 BENCHMARK(BM_RegisterLidarNoSensorAlignedCheck)
     ->ArgName("mode")
@@ -360,10 +369,45 @@ BENCHMARK(BM_RegisterLidarNoSensorAlignedCheck)
     ->Unit(benchmark::kMillisecond);
 
 void BM_RegisterLidarSlowMotion(benchmark::State& state) {
-  RunRegister(state, SlowMotionLidarTrees(), false, SharedRegistrar(), {}, state.range(1) != 0);
+  RunRegister(state, SlowMotionLidarTrees(), false, SharedRegistrar(), {},
+              CheckSensorAlignedAnswers(state.range(1) != 0));
 }
 BENCHMARK(BM_RegisterLidarSlowMotion)
     ->Apply(ModesWithAndWithoutTheCheck)
+    ->Unit(benchmark::kMillisecond);
+
+// Gears (unseen-class object pairs of 2,048 points whose target has near-symmetries, pair seeds
+// 100, 101, ...): what the symmetric start costs where it runs (symmetric:1) against the same
+// pairs without it (symmetric:0). It finds both clouds' breaking nodes, and refines one more start
+// when a twin's meet clearly better (a tooth off).
+const TreePairs& GearTrees() {
+  static const TreePairs* pairs = [] {
+    PairOptions options;
+    options.num_points = 2048;
+    options.split = ObjectSplit::kM2Unseen;
+    std::vector<PointCloud> clouds;
+    for (uint64_t seed = 100; seed < 1000 && clouds.size() < 8; ++seed) {
+      ObjectPair pair = bench::OrDie(MakeObjectPair(options, seed), "object pair");
+      const Octree target = bench::OrDie(BuildOctree(pair.target, ToDepth(6)), "tree");
+      if (FindSelfSymmetries(target).empty()) continue;
+      clouds.push_back(std::move(pair.source));
+      clouds.push_back(std::move(pair.target));
+    }
+    return new TreePairs{bench::TreesOf(clouds, ToDepth(6))};
+  }();
+  return *pairs;
+}
+
+void BM_RegisterGears(benchmark::State& state) {
+  const bool symmetric = state.range(1) != 0;
+  RunRegister(
+      state, GearTrees(), false, SharedRegistrar(), {},
+      [symmetric](RegistrationOptions& options) { options.try_symmetric_starts = symmetric; });
+}
+BENCHMARK(BM_RegisterGears)
+    ->ArgNames({"mode", "symmetric"})
+    ->Args({static_cast<int>(RegistrationMode::kNetRefine), 1})
+    ->Args({static_cast<int>(RegistrationMode::kNetRefine), 0})
     ->Unit(benchmark::kMillisecond);
 
 // What a junction's turn costs net+refine: every start, the search over every turn included.
