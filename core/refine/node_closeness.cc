@@ -177,7 +177,8 @@ std::vector<uint8_t> NodesFarUnderAllButFewPoses(const Octree& source, const Oct
   const double far_distance = far_cells * CellEdge(target, depth);
   // Pose by pose over the nodes still in the running: a node near under more than max_near poses
   // is out, and under a near-symmetry most are near at once, so after the first few poses only
-  // the feature's nodes and a few strays are still looked up (a gear's 14 turns cost ~3 passes).
+  // the feature's nodes and a few strays are still looked up (each pose still builds the depth's
+  // small cell table and the list of nodes in the running).
   std::vector<uint8_t> marked(nodes, 1);
   std::vector<int> near_under(nodes, 0);
   NodeClosenessOptions running;

@@ -239,7 +239,8 @@ BreakingNodes FindBreakingNodes(const Octree& source, const Octree& target,
   if (symmetries.empty()) return breaking;
   breaking.depth = SymmetryDepth(source, target);
   // A node is far from the target turned by S when S^-1 of it is far from the target; the turns
-  // are a group (each one's inverse among them), so the turns themselves serve as poses.
+  // about each axis come with their inverses (k and n - k), so the turns themselves serve as
+  // poses.
   std::vector<Eigen::Isometry3d> turns;
   std::vector<Eigen::Isometry3d> moved = {answer};
   for (const SelfSymmetry& symmetry : symmetries) {
@@ -286,6 +287,9 @@ std::optional<BreakingNodeTwin> TwinMatchingBreakingNodes(
     const std::vector<SelfSymmetry>& symmetries, const BreakingNodes& breaking,
     const SelfSymmetryOptions& options) {
   if (symmetries.empty()) return std::nullopt;
+  if (std::count(breaking.target.begin(), breaking.target.end(), 1) < options.min_breaking_nodes) {
+    return std::nullopt;
+  }
   std::vector<Eigen::Isometry3d> poses = {answer};
   for (const SelfSymmetry& symmetry : symmetries) poses.push_back(symmetry.S * answer);
   const std::vector<double> matches = BreakingNodeMatches(source, target, breaking, poses, options);

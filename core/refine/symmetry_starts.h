@@ -3,17 +3,20 @@
 // everything but that feature. By fitness, inlier RMSE and the nodes' mean distance it fits as
 // well as the truth (unseen gears refined from the truth read no better), and no local step
 // crosses a tooth. What tells the twins apart is the feature's few nodes left without any partner
-// nearby (FarNodeFractions, node_closeness.h).
+// nearby (the breaking nodes, below).
 //
 // FindSelfSymmetries finds the target's near-symmetries on its tree alone: about a principal
 // axis around which the spread is round (its two other principal variances alike, as an n-fold
 // symmetry needs), the turns by k/n of a circle for the n whose circular harmonic of the finest
 // nodes' angles is strongest, kept when the turn by 1/n brings the target's nodes near its own
-// and the turn by half of it does not. SymmetricTwinMargin measures how much better an answer
-// explains the clouds than its best twin: the confidence reads it (confidence_model.h).
-// BestSymmetricTwin picks the twin to refine for the experimental symmetric start
-// (RegistrationOptions::try_symmetric_starts), and among TurnsAboutRoundAxes the turn the
-// round-axis start refines (RegistrationOptions::search_round_axis_start).
+// and the turn by half of it does not. FindBreakingNodes finds each cloud's nodes that break them
+// (a gear's pin), BreakingNodeMatches how well those meet under a pose: TwinMatchingBreakingNodes
+// picks the twin the symmetric start refines (RegistrationOptions::try_symmetric_starts), and the
+// confidence reads the answer's match against its best twin's (confidence_model.h).
+// BestSymmetricTwin, by the count of every node left without a partner (TwoWayFarFraction), picks
+// among TurnsAboutRoundAxes the turn the round-axis start refines
+// (RegistrationOptions::search_round_axis_start); SymmetricTwinMargin is that count's margin
+// (session 23's confidence feature, kept for measurement).
 #ifndef RPSR_CORE_REFINE_SYMMETRY_STARTS_H_
 #define RPSR_CORE_REFINE_SYMMETRY_STARTS_H_
 
@@ -64,6 +67,9 @@ struct SelfSymmetryOptions {
   // A target breaking node is matched under a pose when a source breaking node lies within this
   // many cells of it.
   double breaking_match_cells = 1.5;
+  // A twin is chosen on at least this many target breaking nodes (with one, a single stray of the
+  // source within reach would decide).
+  int min_breaking_nodes = 2;
   // The twin is taken when it matches at least this fraction more of the target's breaking
   // nodes than the answer. On the unseen gears (seeds 1-3, clean) the right tooth matched
   // 0.62-1.0 of them, every other tooth 0-0.43.
@@ -121,11 +127,12 @@ std::optional<double> SymmetricTwinMargin(const Octree& source, const Octree& ta
 // The nodes that break the near-symmetries, at SymmetryDepth, per cloud (marks sized as that
 // depth's level; empty where nothing was measured). The target's are those its own turns leave
 // without a partner. The source's are those that, moved by the answer, lie far from the target
-// under every turn (the identity among them) but one: a pin lies on the target's pin under one
-// turn of the group, whichever twin the answer is, so one answer's breaking nodes serve all its
-// twins. Both are measured against the target, which is undisturbed: a source under outliers or
-// jitter, whose own symmetry may no longer be found, keeps its pin (and its strays, far from
-// every turn, are marked too; they rarely meet the target's few breaking nodes).
+// under every turn (the identity among them) but at most two (breaking_max_turns_near + 1): a
+// pin lies on the target's pin under one turn, whichever twin the answer is, so one answer's
+// breaking nodes serve all its twins. Both are measured against the target, which is undisturbed: a
+// source under outliers or jitter, whose own symmetry may no longer be found, keeps its pin (and
+// its strays, far from every turn, are marked too; they rarely meet the target's few breaking
+// nodes).
 struct BreakingNodes {
   int depth = 0;
   std::vector<uint8_t> source;
@@ -137,8 +144,9 @@ BreakingNodes FindBreakingNodes(const Octree& source, const Octree& target,
                                 const SelfSymmetryOptions& options = {});
 
 // Per pose: the fraction of the target's breaking nodes that find a source breaking node within
-// breaking_match_cells (1 when the features that break the symmetry meet, near 0 a tooth off);
-// negative where it cannot be measured (no breaking node on either side).
+// breaking_match_cells (cells of the source's tree at that depth; 1 when the features that
+// break the symmetry meet, near 0 a tooth off); negative where it cannot be measured (no
+// breaking node on either side).
 std::vector<double> BreakingNodeMatches(const Octree& source, const Octree& target,
                                         const BreakingNodes& breaking,
                                         const std::vector<Eigen::Isometry3d>& poses,
@@ -152,7 +160,8 @@ struct BreakingNodeTwin {
 
 // Among S * answer for the given symmetries, the one whose breaking nodes meet best, when it
 // matches at least min_breaking_match_gain more than the answer and more than every other twin;
-// nullopt otherwise (or where the breaking nodes cannot be measured). Unlike BestSymmetricTwin's
+// nullopt otherwise, with fewer than min_breaking_nodes target breaking nodes, or where the
+// breaking nodes cannot be measured. Unlike BestSymmetricTwin's
 // count of every node left without a partner, where a pin's 2-3 far nodes drown in sampling's, it
 // looks only where the features are, so a tooth off reads 0 against the right tooth's ~1.
 std::optional<BreakingNodeTwin> TwinMatchingBreakingNodes(

@@ -60,7 +60,7 @@ enum ConfidenceFeature {
   kFeatureModeRefine,              // 1 in mode refine
   kFeatureSurfaceScatterCells,     // the source's scatter about the target's planes (0: unmeasured)
   kFeatureNoisePolished,           // 1 when the noise polish ran (tree_refinement.h)
-  kFeatureSymmetricTwinMargin,     // how much better the answer fits than its best symmetric twin
+  kFeatureSymmetricTwinMargin,     // answer's breaking-node match minus its best twin's, [-1, 1]
   kFeatureTurnContrast,  // how many more nodes the answer turned by 45 deg leaves unmatched
   kNumConfidenceFeatures,
 };

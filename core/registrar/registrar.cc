@@ -390,7 +390,7 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
       RefineWithFallback(source, target, from, refinement, cache);
   double confidence_seconds = 0.0;
   // The target's near-symmetries, object-scale pairs only: the confidence's twin margin reads
-  // them, the round-axis start runs only without them (and the experimental symmetric start). A
+  // them, the round-axis start runs only without them, the symmetric start only with them. A
   // target without a round principal axis costs one 3x3 eigen-decomposition; a round one its
   // harmonics and one node-distance measure. A prepared target found them once.
   const auto symmetry_start = Clock::now();

@@ -87,12 +87,12 @@ struct RegistrationOptions {
   // core/refine/symmetry_starts.h: a gear's teeth): each cloud's nodes that break the symmetry
   // (a gear's pin: those its turns leave without a partner) are found, and the answer turned by
   // the symmetry under which they meet clearly better (TwinMatchingBreakingNodes) is refined
-  // too, and kept when, refined, they still do and its fitness is within 5% of the answer's. A
+  // too, and kept when, refined, they still do and its fitness is within 0.05 of the answer's. A
   // refinement that ends a tooth off fits all but the feature that breaks the symmetry, and no
   // local step crosses a tooth. Unseen objects, ten settings of 100 pairs, seeds 1 / 2 / 3: mean
-  // recall at (1 deg, 0.01) 0.804 / 0.777 / 0.793 -> 0.805 / 0.809 / 0.810, 50 answers a tooth
+  // recall at (1 deg, 0.01) 0.804 / 0.777 / 0.793 -> 0.805 / 0.811 / 0.812, 54 answers a tooth
   // off brought back and none of the 3,000 turned wrong (tests/bench/notes/refinement-notes.md,
-  // *Gears a tooth off*). Targets without near-symmetries pay nothing.
+  // *The features that break a symmetry*). Targets without near-symmetries pay nothing.
   bool try_symmetric_starts = true;
   // net+refine on object-scale trees whose answer is still not confident and whose target has a
   // round principal axis but no near-symmetry: the answer turned about that axis by every
@@ -238,6 +238,9 @@ class PreparedTarget {
   bool has_net_encoding() const { return net_encoding != nullptr; }
   // A scene-scale target's dominant plane (its ground), which the sensor-aligned check reads.
   bool has_dominant_plane() const { return dominant_plane.has_value(); }
+  // An object-scale target's near-symmetries found when it was prepared (0: none, or not
+  // object-scale), which the symmetric start and the confidence's twin margin read.
+  size_t num_symmetries() const { return symmetries.has_value() ? symmetries->size() : 0; }
 
  private:
   friend class Registrar;

@@ -146,8 +146,10 @@ TEST(SymmetryStartsTest, TheNodesThatBreakAGearsSymmetryAreItsPin) {
     }
   }
   const ObjectPair sofa = PairsOf("sofa", 1).front();
-  const BreakingNodes none = FindBreakingNodes(
-      RefinementTree(sofa.source, 6), RefinementTree(sofa.target, 6), sofa.T_target_source, {});
+  const Octree sofa_target = RefinementTree(sofa.target, 6);
+  const BreakingNodes none =
+      FindBreakingNodes(RefinementTree(sofa.source, 6), sofa_target, sofa.T_target_source,
+                        FindSelfSymmetries(sofa_target));
   EXPECT_TRUE(none.source.empty() && none.target.empty());
 }
 
@@ -191,6 +193,11 @@ TEST(SymmetryStartsTest, TheTwinWhosePinsMeetIsTheTruth) {
                                      pair->T_target_source.linear().transpose());
         EXPECT_LT(std::abs(rest.angle()) * 180.0 / M_PI, 1e-6) << "pair " << i;
         EXPECT_GE(twin->match, twin->answer_match + SelfSymmetryOptions{}.min_breaking_match_gain);
+        // Too few target breaking nodes to choose on: no twin.
+        SelfSymmetryOptions too_few;
+        too_few.min_breaking_nodes = static_cast<int>(breaking.target.size()) + 1;
+        EXPECT_FALSE(
+            TwinMatchingBreakingNodes(source, target, off, found, breaking, too_few).has_value());
       }
     }
     EXPECT_EQ(gears, 3);

@@ -281,10 +281,10 @@ TEST(RegistrarPreparedTargetTest, AGearsSymmetriesPreparedOnceGiveTheSameAnswer)
     EXPECT_EQ(plain->T_target_source.matrix(), with->T_target_source.matrix());
     EXPECT_EQ(plain->confidence, with->confidence);
     EXPECT_EQ(plain->confidence_features, with->confidence_features);
-    // The margin was measured against the gear's twins (the features' equality above says the
-    // prepared symmetries gave the same); one of these two gears reads 0.5, where a target
-    // without them would read 1.
-    EXPECT_FALSE(FindSelfSymmetries(target).empty());
+    // The prepared target holds the gear's teeth, which the features' equality above says gave
+    // the same margin as Register's own.
+    EXPECT_GT((*prepared)->num_symmetries(), 0u);
+    EXPECT_EQ((*prepared)->num_symmetries(), FindSelfSymmetries(target).size());
   }
   EXPECT_EQ(gears, 2);
 }
