@@ -23,6 +23,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/strip.h"
 #include "absl/time/time.h"
+#include "core/net/openblas_core_choice.h"
 #include "server/rpsr_server.h"
 #include "server/structured_log.h"
 
@@ -116,6 +117,13 @@ int main(int argc, char** argv) {
       "the rpsr registration service (gRPC rpsr.v1.RegistrationService).\n"
       "  rpsrd [--address 0.0.0.0:50051] [--metrics_address 0.0.0.0:9464] [flags]");
   absl::ParseCommandLine(argc, argv);
+  // Before any thread runs: OpenBLAS's kernels for CPUs its Debian version does not know.
+  const rpsr::core::net::OpenBlasCoreChoice blas = rpsr::core::net::MatchOpenBlasCoreToCpu();
+  if (blas.switched) {
+    rpsr::server::LogEvent(
+        "info", "blas_kernels",
+        {{"detected", blas.detected}, {"running", blas.running}, {"reason", blas.reason}});
+  }
 
   // Signals are taken by sigwait in main only: block them before any thread starts.
   sigset_t signals;

@@ -14,6 +14,7 @@
 #include "absl/strings/match.h"
 #include "absl/strings/string_view.h"
 #include "client/cli/subcommands.h"
+#include "core/net/openblas_core_choice.h"
 
 namespace {
 
@@ -69,6 +70,9 @@ void PrintUsage() {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // Before any thread runs: OpenBLAS's kernels for CPUs its Debian version does not know
+  // (core/net/openblas_core_choice.h; `rpsr bench` prints the kernels).
+  rpsr::core::net::MatchOpenBlasCoreToCpu();
   if (argc < 2 || std::strcmp(argv[1], "--help") == 0 || std::strcmp(argv[1], "help") == 0) {
     PrintUsage();
     return argc < 2 ? 2 : 0;

@@ -3,8 +3,10 @@
 #include <dlfcn.h>
 
 #include <cstdlib>
+#include <optional>
 
 #include "absl/strings/str_cat.h"
+#include "core/net/openblas_core_choice.h"
 
 namespace rpsr::core::net {
 
@@ -18,6 +20,10 @@ std::string BlasDescription() {
       config();  // names the chosen core, e.g. "... USE_OPENMP Cooperlake ..."
   if (const char* forced = std::getenv("OPENBLAS_CORETYPE"); forced != nullptr) {
     absl::StrAppend(&description, " (OPENBLAS_CORETYPE=", forced, ")");
+  }
+  if (const std::optional<std::string> from = OpenBlasCoreSwitchedFrom()) {
+    absl::StrAppend(&description, " (chosen by rpsr for this CPU; OpenBLAS took it for ", *from,
+                    ")");
   }
   return description;
 }

@@ -14,7 +14,8 @@ namespace rpsr::core::net {
 
 // OpenBLAS's configuration string, which names the kernels chosen in this process (e.g.
 // "OpenBLAS 0.3.21 NO_LAPACKE DYNAMIC_ARCH NO_AFFINITY USE_OPENMP Cooperlake MAX_THREADS=64"), with
-// " (OPENBLAS_CORETYPE=<value>)" appended when the environment forces a core; or
+// " (OPENBLAS_CORETYPE=<value>)" appended when the environment forces a core, " (chosen by rpsr
+// for this CPU; OpenBLAS took it for <core>)" when MatchOpenBlasCoreToCpu switched it; or
 // "not OpenBLAS" when no OpenBLAS is loaded (e.g. reference BLAS, see ../shared/DEPS.md).
 std::string BlasDescription();
 

@@ -15,6 +15,7 @@
 #include "absl/flags/parse.h"
 #include "core/data/object_pairs.h"
 #include "core/data/registration_metrics.h"
+#include "core/net/openblas_core_choice.h"
 #include "core/registrar/registrar.h"
 #include "core/synth/seeded_random.h"
 
@@ -105,5 +106,6 @@ int Run() {
 
 int main(int argc, char** argv) {
   absl::ParseCommandLine(argc, argv);
+  rpsr::core::net::MatchOpenBlasCoreToCpu();  // as rpsrd and rpsr do
   return rpsr::core::Run();
 }

@@ -39,6 +39,7 @@
 #include "absl/time/time.h"
 #include "core/data/object_pairs.h"
 #include "core/net/blas_info.h"
+#include "core/net/openblas_core_choice.h"
 #include "core/net/rpsr_net.h"
 #include "core/registrar/registrar.h"
 #include "core/tree/bh_tree.h"
@@ -600,5 +601,6 @@ int Main() {
 
 int main(int argc, char** argv) {
   absl::ParseCommandLine(argc, argv);
+  rpsr::core::net::MatchOpenBlasCoreToCpu();  // as rpsrd and rpsr do
   return rpsr::Main();
 }

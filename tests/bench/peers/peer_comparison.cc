@@ -92,6 +92,7 @@
 #include "core/data/registration_metrics.h"
 #include "core/data/simulated_kitti.h"
 #include "core/io/point_cloud_io.h"
+#include "core/net/openblas_core_choice.h"
 #include "core/synth/lidar_sequence.h"
 #include "core/synth/seeded_random.h"
 #include "core/tree/bh_tree.h"
@@ -111,6 +112,7 @@
 #include "pcl/registration/gicp.h"
 #include "pcl/registration/icp.h"
 #if RPSR_PEERS_WITH_REGISTRAR
+#include "core/net/openblas_core_choice.h"
 #include "core/net/rpsr_net.h"
 #include "core/registrar/registrar.h"
 #endif
@@ -861,4 +863,9 @@ int Main(int argc, char** argv) {
 }  // namespace
 }  // namespace rpsr::bench
 
-int main(int argc, char** argv) { return rpsr::bench::Main(argc, argv); }
+int main(int argc, char** argv) {
+#if RPSR_PEERS_WITH_REGISTRAR
+  rpsr::core::net::MatchOpenBlasCoreToCpu();  // rpsr's rows as rpsrd and rpsr run them
+#endif
+  return rpsr::bench::Main(argc, argv);
+}
