@@ -8,6 +8,7 @@
 #define RPSR_CORE_REFINE_DEGENERATE_HOLD_H_
 
 #include "Eigen/Geometry"
+#include "absl/strings/string_view.h"
 #include "core/refine/tree_refinement.h"
 
 namespace rpsr::core {
@@ -20,6 +21,16 @@ namespace rpsr::core {
 // to `prior`. With no degenerate direction it returns refined.T_target_source unchanged.
 Eigen::Isometry3d HoldDegenerateDirections(const TreeRefinementResult& refined,
                                            const Eigen::Isometry3d& prior);
+
+// Adds the turn about `axis` through `point` (target frame) to `refined`'s degenerate directions,
+// where the information cannot show it (a body of revolution's turn about its axis: its samples
+// break the symmetry by chance, so the eigenvalue stays above the threshold): the direction in
+// the same units (rotation rows scaled by the lever arms, about information_center), made
+// orthonormal to those already there (not added where they span it already); degenerate_axes,
+// num_degenerate, valid = false and failure_reason (`why` appended) follow.
+// HoldDegenerateDirections then holds that turn at the prior too.
+void AddDegenerateTurn(const Eigen::Vector3d& axis, const Eigen::Vector3d& point,
+                       absl::string_view why, TreeRefinementResult& refined);
 
 }  // namespace rpsr::core
 

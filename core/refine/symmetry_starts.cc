@@ -140,6 +140,41 @@ std::vector<SelfSymmetry> TurnsAboutRoundAxes(const Octree& target, double step_
   return turns;
 }
 
+std::optional<ContinuousSymmetry> FindContinuousSymmetry(const Octree& target,
+                                                         const SelfSymmetryOptions& options) {
+  if (target.max_depth() < 2 || target.num_points() == 0 || !(options.continuous_step_deg > 0.0)) {
+    return std::nullopt;
+  }
+  const PrincipalAxes principal = PrincipalAxesOf(target, options);
+  const int steps = static_cast<int>(std::lround(360.0 / options.continuous_step_deg));
+  const int depth = SymmetryDepth(target, target);
+  std::optional<ContinuousSymmetry> found;
+  for (int axis = 0; axis < 3; ++axis) {
+    if (!principal.round[axis]) continue;
+    std::vector<Eigen::Isometry3d> turns;
+    for (int k = 1; k < steps; ++k) {
+      turns.push_back(
+          TurnAbout(principal.centre, principal.axes.col(axis), 2.0 * M_PI * k / steps));
+    }
+    const std::vector<double> far =
+        FarNodeFractions(target, target, turns, depth, options.far_cells);
+    double most = 0.0;
+    for (double f : far) most = f < 0.0 ? 1.0 : std::max(most, f);  // unmeasured: not shown round
+    if (most > options.max_continuous_far_fraction ||
+        (found.has_value() && most >= found->max_far_fraction)) {
+      continue;
+    }
+    // A small feature (a cup's tab) leaves few nodes far under each turn, but the same few under
+    // nearly every turn; sampling gaps move from turn to turn.
+    const std::vector<uint8_t> breaking = NodesFarUnderAllButFewPoses(
+        target, target, turns, depth, options.far_cells, options.breaking_max_turns_near);
+    const int breaking_nodes = static_cast<int>(std::count(breaking.begin(), breaking.end(), 1));
+    if (breaking_nodes >= options.min_breaking_nodes) continue;
+    found = ContinuousSymmetry{principal.axes.col(axis).normalized(), principal.centre, most};
+  }
+  return found;
+}
+
 namespace {
 
 // TwoWayFarFraction for several poses (each side's lookup built once).

@@ -404,6 +404,16 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
     }
   }
   const std::vector<SelfSymmetry>& symmetries = *symmetries_of_target;
+  // A body of revolution (a vase, a round table; FindContinuousSymmetry): nothing measures the
+  // turn about its axis, so it is reported as a degenerate direction below, as the information
+  // reports a corridor's length. Looked for only without near-symmetries (a gear's teeth are not
+  // a continuous symmetry; its turns by half a tooth leave ~0.1 of its nodes far).
+  std::optional<ContinuousSymmetry> revolution;
+  if (!IsDeepPair(source, target, refinement) && symmetries.empty()) {
+    revolution = prepared != nullptr && prepared->symmetries.has_value()
+                     ? prepared->revolution
+                     : FindContinuousSymmetry(target);
+  }
   confidence_seconds += SecondsSince(symmetry_start);
   // Fills `out` from a refinement that started at `start_pose`, confidence included.
   auto settle = [&](const TreeRefinementResult& r, const Eigen::Isometry3d& start_pose,
@@ -568,7 +578,7 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   // has near-symmetries (`symmetries` non-empty: twins fit alike, and the twin margin speaks for
   // them); `symmetries` is also empty for scene-scale pairs, hence the depth test.
   if (net_refine && options.search_round_axis_start && best.valid &&
-      result.confidence < kConfidentEnough && symmetries.empty() &&
+      result.confidence < kConfidentEnough && symmetries.empty() && !revolution.has_value() &&
       !IsDeepPair(source, target, refinement)) {
     constexpr double kRoundAxisStepDeg = 15.0;
     const std::vector<SelfSymmetry> turns = TurnsAboutRoundAxes(target, kRoundAxisStepDeg);
@@ -603,6 +613,22 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
         }
       }
     }
+  }
+  if (revolution.has_value()) {
+    const Eigen::Vector3d& a = revolution->axis;
+    const Eigen::Vector3d& c = revolution->centre;
+    AddDegenerateTurn(a, c,
+                      absl::StrFormat("the target is a body of revolution about the axis (%.3f "
+                                      "%.3f %.3f) through (%.4g %.4g %.4g), so the turn about it "
+                                      "is not measured",
+                                      a.x(), a.y(), a.z(), c.x(), c.y(), c.z()),
+                      best);
+    result.valid = best.valid;
+    result.failure_reason = best.failure_reason;
+    result.degenerate_axes = best.degenerate_axes;
+    result.num_degenerate = best.num_degenerate;
+    result.confidence =
+        confidence.Confidence(result.confidence_features, result.valid, result.num_degenerate);
   }
   if (options.hold_degenerate_at_initial && options.initial_T_target_source.has_value() &&
       best.num_degenerate > 0) {
@@ -664,6 +690,7 @@ absl::StatusOr<std::shared_ptr<const PreparedTarget>> Registrar::PrepareTarget(
   if (!IsDeepPair(target, target, TreeRefinementOptions{})) {
     prepared->symmetries = FindSelfSymmetries(target);
     prepared->bytes_ += prepared->symmetries->size() * sizeof(SelfSymmetry);
+    if (prepared->symmetries->empty()) prepared->revolution = FindContinuousSymmetry(target);
   } else {
     prepared->dominant_plane_depth = StageDepths(target, target, TreeRefinementOptions{}).second;
     prepared->dominant_plane = FindDominantPlane(target, prepared->dominant_plane_depth);

@@ -164,6 +164,9 @@ struct RegistrationResult {
   int iterations = 0;        // refinement Gauss-Newton iterations (0 for kNet)
   bool converged = false;
   Eigen::Matrix<double, 6, 6> information = Eigen::Matrix<double, 6, 6>::Zero();
+  // The information's unconstrained directions, and on an object-scale target that is a body of
+  // revolution (FindContinuousSymmetry, core/refine/symmetry_starts.h) the turn about its axis,
+  // which no fit can measure (failure_reason names the axis).
   std::array<bool, 6> degenerate_axes = {};  // rotation x, y, z, translation x, y, z
   int num_degenerate = 0;
   // The pose along the degenerate directions is the caller's initial guess, not a measurement
@@ -241,6 +244,8 @@ class PreparedTarget {
   // An object-scale target's near-symmetries found when it was prepared (0: none, or not
   // object-scale), which the symmetric start and the confidence's twin margin read.
   size_t num_symmetries() const { return symmetries.has_value() ? symmetries->size() : 0; }
+  // An object-scale target found to be a body of revolution when it was prepared.
+  bool is_body_of_revolution() const { return revolution.has_value(); }
 
  private:
   friend class Registrar;
@@ -251,6 +256,9 @@ class PreparedTarget {
   // The target's near-symmetries (FindSelfSymmetries), found once when it is object-scale on its
   // own (a scene's are never read); unset otherwise, and a pair that needs them finds its own.
   std::optional<std::vector<SelfSymmetry>> symmetries;
+  // Whether it is a body of revolution (FindContinuousSymmetry), found with `symmetries` (read
+  // only where those were found).
+  std::optional<ContinuousSymmetry> revolution;
   // The target's dominant plane (FindDominantPlane) at its own finest depth, found once when it
   // is scene-scale on its own; the sensor-aligned check reads it for pairs refined to that depth
   // (a pair whose finest depth differs finds its own).

@@ -1,9 +1,10 @@
 // Clouds and poses the refinement's and the registrar's tests share: degenerate geometry (a
-// square of z = 0, a corridor along x with floor and two walls, a sphere) and a truth perturbed by
-// a known rotation and shift.
+// square of z = 0, a corridor along x with floor and two walls, a sphere, a body of revolution)
+// and a truth perturbed by a known rotation and shift.
 #ifndef RPSR_TESTS_CORE_REFINE_REFINEMENT_TEST_GEOMETRY_H_
 #define RPSR_TESTS_CORE_REFINE_REFINEMENT_TEST_GEOMETRY_H_
 
+#include <cmath>
 #include <cstdint>
 #include <random>
 
@@ -61,6 +62,38 @@ inline PointCloud Sphere(int n, uint64_t seed) {
   for (int i = 0; i < n; ++i) {
     cloud.points.push_back(center +
                            Eigen::Vector3f(normal(rng), normal(rng), normal(rng)).normalized());
+  }
+  return cloud;
+}
+
+// A vase-like body of revolution (radius 0.3 + 0.1 sin(2 z + 0.5) over z in [-1, 1]: elongated, so
+// that its principal axis, which FindContinuousSymmetry turns about, is estimated to within about
+// a degree) about `axis` through (0.1, -0.05, 0.2); with `handle`, a cup's small one: a half ring
+// of a tube on its side takes every 32nd point, which no turn about the axis maps onto itself.
+inline PointCloud BodyOfRevolution(int n, uint64_t seed, const Eigen::Vector3d& axis,
+                                   bool handle = false) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  const Eigen::Quaterniond tilt =
+      Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), axis);
+  const Eigen::Vector3d centre(0.1, -0.05, 0.2);
+  PointCloud cloud;
+  for (int i = 0; i < n; ++i) {
+    Eigen::Vector3d p;
+    const double phi = 2.0 * M_PI * u(rng);
+    if (handle && i % 32 == 0) {
+      // The handle: a tube of radius 0.03 about a half circle of radius 0.12 in the xz plane,
+      // centred on the wall at the widest radius.
+      const double along = M_PI * (u(rng) - 0.5);
+      const Eigen::Vector3d spine(0.4 + 0.12 * std::cos(along), 0.0, 0.12 * std::sin(along));
+      const Eigen::Vector3d out(std::cos(along), 0.0, std::sin(along));
+      p = spine + 0.03 * (std::cos(phi) * out + std::sin(phi) * Eigen::Vector3d::UnitY());
+    } else {
+      const double z = -1.0 + 2.0 * u(rng);
+      const double r = 0.3 + 0.1 * std::sin(2.0 * z + 0.5);
+      p = Eigen::Vector3d(r * std::cos(phi), r * std::sin(phi), z);
+    }
+    cloud.points.push_back((centre + tilt * p).cast<float>());
   }
   return cloud;
 }

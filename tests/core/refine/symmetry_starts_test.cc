@@ -1,5 +1,6 @@
-// FindSelfSymmetries, BestSymmetricTwin and the breaking nodes (core/refine/symmetry_starts.h): a
-// gear's teeth are found as turns about its axis, an object without a symmetry has none, the
+// FindSelfSymmetries, BestSymmetricTwin, the breaking nodes and FindContinuousSymmetry
+// (core/refine/symmetry_starts.h): a gear's teeth are found as turns about its axis, a body of
+// revolution's axis is found and a mug's is not, an object without a symmetry has none, the
 // feature that breaks a gear's symmetry (its pin) leaves more nodes without a partner a tooth off
 // than at the truth, and its nodes meet the other cloud's at the truth only.
 #include "core/refine/symmetry_starts.h"
@@ -66,10 +67,34 @@ TEST(SymmetryStartsTest, AnObjectWithoutSymmetryHasNone) {
   }
 }
 
+TEST(SymmetryStartsTest, ABodyOfRevolutionIsFoundAboutItsAxisAndAMugIsNot) {
+  const Eigen::Vector3d axis = Eigen::Vector3d(1.0, -2.0, 0.5).normalized();
+  for (uint64_t seed : {1, 2, 3}) {
+    const Octree vase = RefinementTree(testing_util::BodyOfRevolution(1024, seed, axis), 6);
+    const std::optional<ContinuousSymmetry> found = FindContinuousSymmetry(vase);
+    ASSERT_TRUE(found.has_value()) << "seed " << seed;
+    EXPECT_GT(std::abs(found->axis.dot(axis)), 0.999) << found->axis.transpose();
+    EXPECT_LE(found->max_far_fraction, SelfSymmetryOptions{}.max_continuous_far_fraction);
+    const Eigen::Vector3d centre = vase.level(0).center_of_mass[0].cast<double>();
+    EXPECT_LT((found->centre - centre).norm(), 1e-9);
+    // Every 32nd point on a small handle: no turn maps it onto itself, and its nodes stay far
+    // under nearly every turn.
+    const Octree mug = RefinementTree(testing_util::BodyOfRevolution(1024, seed, axis, true), 6);
+    EXPECT_FALSE(FindContinuousSymmetry(mug).has_value()) << "seed " << seed;
+  }
+  // A gear's teeth are a discrete symmetry; a sofa has none.
+  for (const char* family : {"gear", "sofa"}) {
+    for (const ObjectPair& pair : PairsOf(family, 3)) {
+      EXPECT_FALSE(FindContinuousSymmetry(RefinementTree(pair.target, 6)).has_value()) << family;
+    }
+  }
+}
+
 TEST(SymmetryStartsTest, ATinyOrEmptyTreeHasNone) {
   PointCloud one;
   one.points.emplace_back(0.1f, 0.2f, 0.3f);
   EXPECT_TRUE(FindSelfSymmetries(RefinementTree(one, 1)).empty());
+  EXPECT_FALSE(FindContinuousSymmetry(RefinementTree(one, 1)).has_value());
   EXPECT_FALSE(BestSymmetricTwin(RefinementTree(one, 1), RefinementTree(one, 1),
                                  Eigen::Isometry3d::Identity(), {})
                    .has_value());

@@ -450,6 +450,54 @@ TEST(RegistrarDegenerateTest, PlaneCorridorAndSphereAreNeverConfident) {
   }
 }
 
+// A vase-like body of revolution turned 25 degrees and shifted: every mode aligns it (the axis
+// lands on the target's) but reports the turn about the axis as unmeasured, never as a confident
+// pose; a prepared target says the same. With a handle (a mug) the same pair is registered as
+// any other object.
+TEST(RegistrarDegenerateTest, ABodyOfRevolutionIsNeverConfident) {
+  const Eigen::Vector3d axis = Eigen::Vector3d(0.3, 0.2, 1.0).normalized();
+  const Eigen::Isometry3d truth = MakeTransform(
+      Eigen::AngleAxisd(25.0 * M_PI / 180.0, Eigen::Vector3d(1.0, 0.4, -0.2).normalized())
+          .toRotationMatrix(),
+      Eigen::Vector3d(0.08, -0.05, 0.03));
+  for (bool handle : {false, true}) {
+    PointCloud source = testing_util::BodyOfRevolution(1024, 1, axis, handle);
+    PointCloud target = testing_util::BodyOfRevolution(1024, 2, axis, handle);
+    for (Eigen::Vector3f& p : target.points) p = (truth * p.cast<double>()).cast<float>();
+    const Octree source_tree = TreeOf(source);
+    const Octree target_tree = TreeOf(target);
+    auto prepared = SharedRegistrar().PrepareTarget(target_tree);
+    ASSERT_TRUE(prepared.ok()) << prepared.status();
+    EXPECT_EQ((*prepared)->is_body_of_revolution(), !handle);
+    for (RegistrationMode mode :
+         {RegistrationMode::kNet, RegistrationMode::kNetRefine, RegistrationMode::kRefine}) {
+      RegistrationOptions options;
+      options.mode = mode;
+      if (mode == RegistrationMode::kRefine) options.initial_T_target_source = truth;
+      auto result = SharedRegistrar().Register(source_tree, target_tree, options);
+      auto with = SharedRegistrar().Register(source_tree, **prepared, options);
+      ASSERT_TRUE(result.ok() && with.ok()) << result.status() << with.status();
+      const std::string where = absl::StrCat(handle ? "mug " : "vase ", RegistrationModeName(mode));
+      EXPECT_EQ(result->T_target_source.matrix(), with->T_target_source.matrix()) << where;
+      EXPECT_EQ(result->valid, with->valid) << where;
+      EXPECT_EQ(result->confidence, with->confidence) << where;
+      if (handle) {
+        EXPECT_THAT(result->failure_reason, Not(HasSubstr("body of revolution"))) << where;
+        continue;
+      }
+      EXPECT_FALSE(result->valid) << where;
+      EXPECT_GT(result->num_degenerate, 0) << where;
+      EXPECT_THAT(result->failure_reason, HasSubstr("body of revolution")) << where;
+      EXPECT_EQ(result->confidence, 0.0) << where;
+      if (mode != RegistrationMode::kNet) {
+        // The axis itself is measured: the answer turns it onto the truth's.
+        const Eigen::Vector3d landed = result->T_target_source.linear() * axis;
+        EXPECT_GT(landed.dot(truth.linear() * axis), std::cos(2.0 * M_PI / 180.0)) << where;
+      }
+    }
+  }
+}
+
 // RegistrationOptions::hold_degenerate_at_initial: a corridor along x registered from a guess off
 // by 0.6 m along it and 0.15 m across. Along the corridor nothing measures the shift, so the
 // answer keeps the guess's 0.6 m there (and says so); across it the refinement corrects the guess.
