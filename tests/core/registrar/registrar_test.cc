@@ -498,6 +498,40 @@ TEST(RegistrarDegenerateTest, ABodyOfRevolutionIsNeverConfident) {
   }
 }
 
+// The turn added to a body of revolution's degenerate directions is the turn about its axis: from
+// a guess turned 20 degrees about the axis (and off by 3 degrees about another axis and 0.02 in
+// translation), mode refine corrects the rest and keeps the guess's turn about the axis. (The
+// clouds overlap whole, so the matched points' centroid is about the axis's point and the
+// direction's translation part, w x (c - point), is near zero: this reads its turn.)
+TEST(RegistrarDegenerateTest, ABodyOfRevolutionKeepsTheGuessesTurnAboutItsAxis) {
+  const Eigen::Vector3d axis = Eigen::Vector3d(0.3, 0.2, 1.0).normalized();
+  PointCloud source = testing_util::BodyOfRevolution(1024, 1, axis);
+  const PointCloud target = testing_util::BodyOfRevolution(1024, 2, axis);  // truth: identity
+  const Eigen::Vector3d centre = TreeOf(target).level(0).center_of_mass[0].cast<double>();
+  const Eigen::Isometry3d about_axis = Eigen::Translation3d(centre) *
+                                       Eigen::AngleAxisd(20.0 * M_PI / 180.0, axis) *
+                                       Eigen::Translation3d(-centre);
+  const Eigen::Vector3d other = axis.cross(Eigen::Vector3d::UnitX()).normalized();
+  const Eigen::Isometry3d guess =
+      MakeTransform(Eigen::AngleAxisd(3.0 * M_PI / 180.0, other).toRotationMatrix(),
+                    Eigen::Vector3d(0.02, 0.0, -0.01)) *
+      about_axis;
+  RegistrationOptions options;
+  options.mode = RegistrationMode::kRefine;
+  options.initial_T_target_source = guess;
+  auto held = SharedRegistrar().Register(TreeOf(source), TreeOf(target), options);
+  ASSERT_TRUE(held.ok()) << held.status();
+  EXPECT_FALSE(held->valid);
+  EXPECT_TRUE(held->held_at_initial);
+  EXPECT_THAT(held->failure_reason, HasSubstr("body of revolution"));
+  // The held answer is the truth turned by the guess's 20 degrees about the axis.
+  const PairError error = ErrorOf(held->T_target_source, about_axis);
+  EXPECT_LT(error.rotation_deg, 1.0) << held->failure_reason;
+  EXPECT_LT(error.translation, 0.01);
+  // The axis itself was corrected: it lands on the target's.
+  EXPECT_GT((held->T_target_source.linear() * axis).dot(axis), std::cos(1.0 * M_PI / 180.0));
+}
+
 // RegistrationOptions::hold_degenerate_at_initial: a corridor along x registered from a guess off
 // by 0.6 m along it and 0.15 m across. Along the corridor nothing measures the shift, so the
 // answer keeps the guess's 0.6 m there (and says so); across it the refinement corrects the guess.
