@@ -71,7 +71,7 @@ void PrintUsage() {
 
 int main(int argc, char** argv) {
   // Before any thread runs: OpenBLAS's kernels for CPUs its Debian version does not know
-  // (core/net/openblas_core_choice.h; `rpsr bench` prints the kernels).
+  // (core/net/openblas_core_choice.h).
   rpsr::core::net::MatchOpenBlasCoreToCpu();
   if (argc < 2 || std::strcmp(argv[1], "--help") == 0 || std::strcmp(argv[1], "help") == 0) {
     PrintUsage();

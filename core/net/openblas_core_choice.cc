@@ -29,12 +29,13 @@ Function Lookup(const char* name) {
 constexpr std::array<const char*, 6> kCoresWithAvx2Kernels = {
     "Haswell", "Zen", "SkylakeX", "Cooperlake", "SapphireRapids", "Excavator"};
 
-// The x86-64 names SwitchOpenBlasCore takes (OPENBLAS_CORETYPE's in 0.3.21): OpenBLAS answers an
-// unknown one with a warning and a fallback of its own.
-constexpr std::array<const char*, 20> kSwitchableCores = {
-    "Prescott",    "Atom",      "Core2",       "Penryn",   "Dunnington", "Nehalem",     "Opteron",
-    "Barcelona",   "Nano",      "SandyBridge", "Bobcat",   "Bulldozer",  "Piledriver",  "Haswell",
-    "Steamroller", "Excavator", "Zen",         "SkylakeX", "Cooperlake", "Opteron_SSE3"};
+// The x86-64 names SwitchOpenBlasCore takes: OPENBLAS_CORETYPE's that openblas_get_corename
+// reports back as themselves (without DYNAMIC_OLDER, Atom, Penryn, Dunnington, Opteron, Nano and
+// Bobcat run and report another core's table; SapphireRapids cannot be forced), so that success
+// can be read back. OpenBLAS answers an unknown name with a warning and a fallback of its own.
+constexpr std::array<const char*, 13> kSwitchableCores = {
+    "Prescott",    "Core2",   "Nehalem",   "Barcelona", "SandyBridge", "Bulldozer", "Piledriver",
+    "Steamroller", "Haswell", "Excavator", "Zen",       "SkylakeX",    "Cooperlake"};
 
 bool SameCore(absl::string_view a, absl::string_view b) {
   return a.size() == b.size() && strncasecmp(a.data(), b.data(), a.size()) == 0;

@@ -142,20 +142,17 @@ std::vector<SelfSymmetry> TurnsAboutRoundAxes(const Octree& target, double step_
 
 std::optional<ContinuousSymmetry> FindContinuousSymmetry(const Octree& target,
                                                          const SelfSymmetryOptions& options) {
-  if (target.max_depth() < 2 || target.num_points() == 0 || !(options.continuous_step_deg > 0.0)) {
-    return std::nullopt;
-  }
-  const PrincipalAxes principal = PrincipalAxesOf(target, options);
-  const int steps = static_cast<int>(std::lround(360.0 / options.continuous_step_deg));
+  // The turns about each round axis, k = 1 .. n - 1 in a row per axis.
+  const std::vector<SelfSymmetry> all =
+      TurnsAboutRoundAxes(target, options.continuous_step_deg, options);
   const int depth = SymmetryDepth(target, target);
   std::optional<ContinuousSymmetry> found;
-  for (int axis = 0; axis < 3; ++axis) {
-    if (!principal.round[axis]) continue;
+  for (size_t first = 0; first < all.size();) {
+    size_t last = first;
+    while (last < all.size() && all[last].axis == all[first].axis) ++last;
     std::vector<Eigen::Isometry3d> turns;
-    for (int k = 1; k < steps; ++k) {
-      turns.push_back(
-          TurnAbout(principal.centre, principal.axes.col(axis), 2.0 * M_PI * k / steps));
-    }
+    for (size_t k = first; k < last; ++k) turns.push_back(all[k].S);
+    first = last;
     const std::vector<double> far =
         FarNodeFractions(target, target, turns, depth, options.far_cells);
     double most = 0.0;
@@ -170,7 +167,9 @@ std::optional<ContinuousSymmetry> FindContinuousSymmetry(const Octree& target,
         target, target, turns, depth, options.far_cells, options.breaking_max_turns_near);
     const int breaking_nodes = static_cast<int>(std::count(breaking.begin(), breaking.end(), 1));
     if (breaking_nodes >= options.min_breaking_nodes) continue;
-    found = ContinuousSymmetry{principal.axes.col(axis).normalized(), principal.centre, most};
+    // The turns are about the target's centre of mass (TurnsAboutRoundAxes).
+    const Eigen::AngleAxisd turn(turns.front().linear());
+    found = ContinuousSymmetry{turn.axis(), target.level(0).center_of_mass[0].cast<double>(), most};
   }
   return found;
 }

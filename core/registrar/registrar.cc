@@ -407,7 +407,7 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   // A body of revolution (a vase, a round table; FindContinuousSymmetry): nothing measures the
   // turn about its axis, so it is reported as a degenerate direction below, as the information
   // reports a corridor's length. Looked for only without near-symmetries (a gear's teeth are not
-  // a continuous symmetry; its turns by half a tooth leave ~0.1 of its nodes far).
+  // a continuous symmetry: its turns by every 15 degrees left 0.09 or more of its nodes far).
   std::optional<ContinuousSymmetry> revolution;
   if (!IsDeepPair(source, target, refinement) && symmetries.empty()) {
     revolution = prepared != nullptr && prepared->symmetries.has_value()
