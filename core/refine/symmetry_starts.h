@@ -87,6 +87,12 @@ struct SelfSymmetryOptions {
   // tables none.
   double max_continuous_far_fraction = 0.03;
   double continuous_step_deg = 15.0;
+  // The turns are about the axis the target registered onto itself turns about (from a quarter
+  // turn about the principal axis), not the principal axis itself, which sampling tilts on squat
+  // bodies (FindContinuousSymmetry). false: the principal axis (session 30's detector).
+  bool refine_continuous_axis = true;
+  // That refinement's turn is read only when it turned by at least this much.
+  double min_axis_turn_deg = 30.0;
 };
 
 struct SelfSymmetry {
@@ -119,16 +125,20 @@ struct ContinuousSymmetry {
   double max_far_fraction = 0.0;  // the most any tried turn left without a partner
 };
 
-// The round principal axis (principal variances as for TurnsAboutRoundAxes) about which every
-// turn by a multiple of continuous_step_deg leaves at most max_continuous_far_fraction of the
-// target's nodes at SymmetryDepth without a partner within far_cells, and no feature's nodes
-// (fewer than min_breaking_nodes far under all turns but breaking_max_turns_near: a cup's small
-// tab tells its turns apart, and the round-axis start finds it); the least such where several
-// are; nullopt otherwise (and for trees shallower than 2). A round target costs 23 turns'
-// node lookups per round axis; any other one eigen-decomposition. The turns are about the
-// principal axis, which sampling tilts by a few degrees where the variance along it is near the
-// others' (a squat vase): such a body is not found (its far fractions reach 0.1-0.2), and is
-// registered as any object.
+// Whether the target is a body of revolution, and about which axis. For its round principal
+// axes (principal variances as for TurnsAboutRoundAxes), the roundest first, the target is
+// registered onto itself from a quarter turn about the axis (refine_continuous_axis), and the
+// axis it ends turned about is taken through its centre of mass: a body of revolution ends turned
+// about its true axis, which the principal axis misses by 3-19 degrees on squat bodies (the
+// seen split's round tables: turns about the principal axis left 4-71% of their nodes far, about
+// the refined one 0.2-1%). It is one when every turn by a multiple of continuous_step_deg about
+// that axis leaves at most max_continuous_far_fraction of its nodes at SymmetryDepth without a
+// partner within far_cells, and no feature's nodes (fewer than min_breaking_nodes far under all
+// turns but breaking_max_turns_near: a cup's small tab tells its turns apart, and the round-axis
+// start finds it); the first axis so is returned; nullopt otherwise (and for trees shallower
+// than 2). A target without a round axis costs one eigen-decomposition; a round one, per round
+// axis tried, a shallow self-registration and three turns' node lookups (23 turns' and the
+// breaking nodes' where those three pass).
 std::optional<ContinuousSymmetry> FindContinuousSymmetry(const Octree& target,
                                                          const SelfSymmetryOptions& options = {});
 

@@ -98,6 +98,49 @@ inline PointCloud BodyOfRevolution(int n, uint64_t seed, const Eigen::Vector3d& 
   return cloud;
 }
 
+// A round table about `axis` through (0.1, -0.05, 0.2): a top of radius 0.8 and thickness 0.04
+// at height 0.46, a column of radius 0.07 down to a base disc of radius 0.5 at -0.46, points
+// spread over the surfaces by area. Squat: its radial variances are 1.2 times its axial one, so
+// its principal axis from 1,024 samples is degrees off (4.6-19.8 on seeds 1-4, as on the seen
+// split's round tables), and only a refined axis finds it a body of revolution.
+inline PointCloud RoundTable(int n, uint64_t seed, const Eigen::Vector3d& axis) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  const Eigen::Quaterniond tilt =
+      Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), axis);
+  const Eigen::Vector3d centre(0.1, -0.05, 0.2);
+  constexpr double kTop = 0.8, kThickness = 0.04, kColumn = 0.07, kBase = 0.5;
+  constexpr double kTopZ = 0.46, kBaseZ = -0.46;
+  // Areas: the top's two faces and rim, the column's side, the base's upper face.
+  const double top = 2.0 * M_PI * kTop * kTop;
+  const double rim = 2.0 * M_PI * kTop * kThickness;
+  const double column = 2.0 * M_PI * kColumn * (kTopZ - kBaseZ);
+  const double base = M_PI * kBase * kBase;
+  const double total = top + rim + column + base;
+  PointCloud cloud;
+  for (int i = 0; i < n; ++i) {
+    const double pick = total * u(rng);
+    const double phi = 2.0 * M_PI * u(rng);
+    Eigen::Vector3d p;
+    if (pick < top) {  // a disc face: radius by sqrt for an even spread
+      const double r = kTop * std::sqrt(u(rng));
+      const double z = kTopZ + (u(rng) < 0.5 ? 0.5 : -0.5) * kThickness;
+      p = Eigen::Vector3d(r * std::cos(phi), r * std::sin(phi), z);
+    } else if (pick < top + rim) {
+      p = Eigen::Vector3d(kTop * std::cos(phi), kTop * std::sin(phi),
+                          kTopZ + kThickness * (u(rng) - 0.5));
+    } else if (pick < top + rim + column) {
+      p = Eigen::Vector3d(kColumn * std::cos(phi), kColumn * std::sin(phi),
+                          kBaseZ + (kTopZ - kBaseZ) * u(rng));
+    } else {
+      const double r = kBase * std::sqrt(u(rng));
+      p = Eigen::Vector3d(r * std::cos(phi), r * std::sin(phi), kBaseZ);
+    }
+    cloud.points.push_back((centre + tilt * p).cast<float>());
+  }
+  return cloud;
+}
+
 }  // namespace rpsr::core::testing_util
 
 #endif  // RPSR_TESTS_CORE_REFINE_REFINEMENT_TEST_GEOMETRY_H_

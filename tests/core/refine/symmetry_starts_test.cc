@@ -1,8 +1,9 @@
 // FindSelfSymmetries, BestSymmetricTwin, the breaking nodes and FindContinuousSymmetry
 // (core/refine/symmetry_starts.h): a gear's teeth are found as turns about its axis, a body of
-// revolution's axis is found and a mug's is not, an object without a symmetry has none, the
-// feature that breaks a gear's symmetry (its pin) leaves more nodes without a partner a tooth off
-// than at the truth, and its nodes meet the other cloud's at the truth only.
+// revolution's axis is found (a squat one's too, whose principal axis is off) and a mug's is
+// not, an object without a symmetry has none, the feature that breaks a gear's symmetry (its pin)
+// leaves more nodes without a partner a tooth off than at the truth, and its nodes meet the
+// other cloud's at the truth only.
 #include "core/refine/symmetry_starts.h"
 
 #include <cmath>
@@ -67,6 +68,24 @@ TEST(SymmetryStartsTest, AnObjectWithoutSymmetryHasNone) {
   }
 }
 
+// testing_util::BodyOfRevolution's and RoundTable's axes pass through this point.
+const Eigen::Vector3d kBodyCentre(0.1, -0.05, 0.2);
+
+double DistanceFromLine(const Eigen::Vector3d& p, const Eigen::Vector3d& point,
+                        const Eigen::Vector3d& axis) {
+  return (p - point).cross(axis).norm();
+}
+
+// The angle between an axis and the target's principal axis nearest it, in degrees.
+double PrincipalAxisErrorDeg(const Octree& target, const Eigen::Vector3d& axis) {
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(
+      target.Covariance(0, 0).cast<double>());
+  double best = 0.0;
+  for (int k = 0; k < 3; ++k)
+    best = std::max(best, std::abs(solver.eigenvectors().col(k).dot(axis)));
+  return std::acos(std::min(best, 1.0)) * 180.0 / M_PI;
+}
+
 TEST(SymmetryStartsTest, ABodyOfRevolutionIsFoundAboutItsAxisAndAMugIsNot) {
   const Eigen::Vector3d axis = Eigen::Vector3d(1.0, -2.0, 0.5).normalized();
   for (uint64_t seed : {1, 2, 3}) {
@@ -88,6 +107,35 @@ TEST(SymmetryStartsTest, ABodyOfRevolutionIsFoundAboutItsAxisAndAMugIsNot) {
       EXPECT_FALSE(FindContinuousSymmetry(RefinementTree(pair.target, 6)).has_value()) << family;
     }
   }
+}
+
+// A squat body's principal axis is off by degrees, and turns about it leave many nodes far: the
+// target registered onto itself finds the true axis (session 31; session 30's detector, which
+// turned about the principal axis, missed such round tables).
+TEST(SymmetryStartsTest, ASquatBodyOfRevolutionIsFoundAboutItsTrueAxisNotItsPrincipalOne) {
+  const Eigen::Vector3d axis = Eigen::Vector3d(0.3, 0.2, 1.0).normalized();
+  SelfSymmetryOptions principal_only;
+  principal_only.refine_continuous_axis = false;
+  int principal_off = 0;
+  for (uint64_t seed : {1, 2, 3, 4}) {
+    const Octree table = RefinementTree(testing_util::RoundTable(1024, seed, axis), 6);
+    const double principal_error = PrincipalAxisErrorDeg(table, axis);
+    std::printf("seed %d: principal axis %.2f degrees off\n", static_cast<int>(seed),
+                principal_error);
+    const std::optional<ContinuousSymmetry> found = FindContinuousSymmetry(table);
+    ASSERT_TRUE(found.has_value()) << "seed " << seed;
+    EXPECT_GT(std::abs(found->axis.dot(axis)), std::cos(M_PI / 180.0)) << found->axis.transpose();
+    EXPECT_LE(found->max_far_fraction, SelfSymmetryOptions{}.max_continuous_far_fraction);
+    // Through the centre of mass, which sampling moves off the true axis (0.012-0.041 on these
+    // seeds; its spread across the axis is ~0.0125, the top's radial spread 0.4 over 32).
+    EXPECT_LT(DistanceFromLine(found->centre, kBodyCentre, axis), 0.05);
+    if (principal_error > 2.0) {
+      ++principal_off;
+      EXPECT_FALSE(FindContinuousSymmetry(table, principal_only).has_value()) << "seed " << seed;
+    }
+  }
+  // The case the refinement exists for occurs among these seeds.
+  EXPECT_GE(principal_off, 1);
 }
 
 TEST(SymmetryStartsTest, ATinyOrEmptyTreeHasNone) {
