@@ -8,7 +8,9 @@
 // BM_RefineSparseLidar/depth:D the same on a simulated VLP-16 drive (the line rule chosen on);
 // BM_RefineObject/points:N refines an object pair from the truth perturbed by 10 degrees and
 // 0.07; BM_LineShapedFraction/depth:D is the line rule's choice on one of those trees;
-// BM_MeanNodeDistance/lidar:L the registrar's closeness of two starts' answers. Accuracy
+// BM_MeanNodeDistance/lidar:L the registrar's closeness of two starts' answers;
+// BM_FarNodeFractions/lidar:L the confidence's turn contrast (the answer and six 45-degree turns,
+// 512 nodes one depth above the finest). Accuracy
 // (one pass each, counters): BM_ObjectAccuracy/from_truth_deg:A starts 40
 // asymmetric object pairs at the truth rotated by A degrees about a random axis and shifted by
 // 0.07; BM_ObjectBasin/max_angle_deg:A starts them at the identity with the paper's protocol
@@ -177,6 +179,50 @@ void BM_MeanNodeDistance(benchmark::State& state) {
   state.counters["mean_cells"] = cells;
 }
 BENCHMARK(BM_MeanNodeDistance)->ArgName("lidar")->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+
+// The confidence's turn contrast (confidence_model.cc's TurnContrast, run for every answer the
+// registrar settles): FarNodeFractions over the true pose and its six 45-degree turns about the
+// moved source's centre, 512 nodes one depth above the finest, on the same pairs.
+void BM_FarNodeFractions(benchmark::State& state) {
+  const bool lidar = state.range(0) != 0;
+  Octree source;
+  Octree target;
+  Eigen::Isometry3d truth;
+  if (lidar) {
+    target = TreeOf(Thinned(Drive().SimulateFrame(10).cloud, 120'000), 9);
+    source = TreeOf(Thinned(Drive().SimulateFrame(15).cloud, 120'000), 9);
+    truth = TruthOf(10, 15);
+  } else {
+    PairOptions options;
+    auto pair = MakeObjectPair(options, 1);
+    if (!pair.ok()) std::abort();
+    source = TreeOf(pair->source, 6);
+    target = TreeOf(pair->target, 6);
+    truth = pair->T_target_source;
+  }
+  const Eigen::Vector3d pivot = truth * source.level(0).center_of_mass[0].cast<double>();
+  std::vector<Eigen::Isometry3d> poses = {truth};
+  for (int axis = 0; axis < 3; ++axis) {
+    for (double sign : {-1.0, 1.0}) {
+      const Eigen::AngleAxisd turn(sign * M_PI / 4.0, Eigen::Vector3d::Unit(axis));
+      Eigen::Isometry3d about = Eigen::Isometry3d::Identity();
+      about.linear() = turn.toRotationMatrix();
+      about.translation() = pivot - turn * pivot;
+      poses.push_back(about * truth);
+    }
+  }
+  const int depth = std::min(source.max_depth(), target.max_depth()) - 1;
+  NodeClosenessOptions sample;
+  sample.max_source_nodes = 512;
+  std::vector<double> far;
+  for (auto _ : state) {
+    far = FarNodeFractions(source, target, poses, depth, 1.9, sample);
+    benchmark::DoNotOptimize(far.data());
+  }
+  state.counters["far_at_truth"] = far.front();
+  state.counters["far_turned"] = far.back();
+}
+BENCHMARK(BM_FarNodeFractions)->ArgName("lidar")->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 
 ObjectPair AsymmetricPair(const PairOptions& options, uint64_t& seed) {
   while (true) {
