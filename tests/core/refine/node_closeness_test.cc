@@ -135,6 +135,48 @@ TEST(NodeClosenessTest, FarNodeFractionsEqualASearchOfEveryNode) {
   }
 }
 
+// The exact capped nearest distance, whatever search finds it (the cells' bounding boxes pass
+// over cells that cannot hold a nearer partner): against every target node, with and without a
+// mask of partners, under turns that leave many nodes without one.
+TEST(NodeClosenessTest, MeanNodeDistanceEqualsASearchOfEveryNode) {
+  auto pair = MakeObjectPair(testing_util::UnseenPairs(DisturbanceKind::kGaussianNoise, 1), 7);
+  ASSERT_TRUE(pair.ok()) << pair.status();
+  const Octree source = RefinementTree(pair->source, kDepth);
+  const Octree target = RefinementTree(pair->target, kDepth);
+  for (int depth : {kDepth - 1, kDepth}) {
+    const Octree::Level& s = source.level(depth);
+    const Octree::Level& t = target.level(depth);
+    std::vector<uint8_t> every_third(t.size(), 0);
+    for (size_t j = 0; j < t.size(); j += 3) every_third[j] = 1;
+    for (const std::vector<uint8_t>* partners :
+         {static_cast<std::vector<uint8_t>*>(nullptr), &every_third}) {
+      NodeClosenessOptions options;
+      options.target_nodes = partners;
+      for (double deg : {0.0, 10.0, 45.0}) {
+        Eigen::Isometry3d turn = Eigen::Isometry3d::Identity();
+        turn.linear() =
+            Eigen::AngleAxisd(deg * M_PI / 180.0, Eigen::Vector3d(1, 2, 3).normalized()).matrix();
+        const Eigen::Isometry3d pose = turn * pair->T_target_source;
+        const double cap = NodeClosenessOptions::kCapCells * EdgeOf(target, depth);
+        ASSERT_LE(s.size(), options.max_source_nodes);  // every node is sampled
+        double sum = 0.0;
+        for (size_t i = 0; i < s.size(); ++i) {
+          const Eigen::Vector3d q = pose * s.center_of_mass[i].cast<double>();
+          double nearest2 = cap * cap;
+          for (size_t j = 0; j < t.size(); ++j) {
+            if (partners != nullptr && !(*partners)[j]) continue;
+            nearest2 = std::min(nearest2, (t.center_of_mass[j].cast<double>() - q).squaredNorm());
+          }
+          sum += std::sqrt(nearest2);
+        }
+        const double expected = sum / static_cast<double>(s.size()) / EdgeOf(target, depth);
+        EXPECT_NEAR(MeanNodeDistanceCells(source, target, pose, depth, options), expected, 1e-12)
+            << "depth " << depth << ", " << deg << " degrees, mask " << (partners != nullptr);
+      }
+    }
+  }
+}
+
 TEST(NodeClosenessTest, TheSampleIsAnEvenStrideOverTheSourceNodes) {
   const Octree tree = RefinementTree(Lattice(), kDepth);
   const double edge = EdgeOf(tree, kDepth);
