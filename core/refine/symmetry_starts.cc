@@ -162,17 +162,21 @@ struct TurnLine {
 // sampling's ~0.01, which a body of revolution's centre of mass does in the limit. The
 // refinement stops one depth above SymmetryDepth and refines the source's own cells (no
 // re-binning, no joint stage): enough to level the axis, at about a quarter of a full
-// refinement's cost. `start` itself where the refinement fails or ends turned by less than
-// min_axis_turn_deg (a small turn's axis is noise).
+// refinement's cost (no noise polish either: the target lies on itself, nothing scatters). Its
+// result is read when it is valid or invalid only for degenerate directions (as a round table's
+// is: the self-registration finds the translations across the axis unconstrained); `start`
+// itself where it failed otherwise (no overlap, a singular system), or ended turned by less than
+// min_axis_turn_deg (a small turn's axis is noise). `cache`: shared by a target's calls.
 TurnLine RefineTurnLine(const Octree& target, const TurnLine& start,
-                        const SelfSymmetryOptions& options) {
+                        const SelfSymmetryOptions& options, TreeRefinementCache& cache) {
   TreeRefinementOptions lean;
   lean.finest_depth = std::max(SymmetryDepth(target, target) - 1, 1);
   lean.rebin_coarse_depths = false;
   lean.joint_finest_stage = false;
+  lean.noise_polish = false;
   const absl::StatusOr<TreeRefinementResult> refined =
-      RefineOnTrees(target, target, TurnAbout(start.point, start.axis, 0.5 * M_PI), lean);
-  if (!refined.ok()) return start;
+      RefineOnTrees(target, target, TurnAbout(start.point, start.axis, 0.5 * M_PI), lean, cache);
+  if (!refined.ok() || !(refined->valid || refined->num_degenerate > 0)) return start;
   const Eigen::AngleAxisd turn(refined->T_target_source.linear());
   if (!(turn.angle() >= options.min_axis_turn_deg * M_PI / 180.0) || !turn.axis().allFinite()) {
     return start;
@@ -181,13 +185,11 @@ TurnLine RefineTurnLine(const Octree& target, const TurnLine& start,
   return TurnLine{axis.dot(start.axis) < 0.0 ? Eigen::Vector3d(-axis) : axis, start.point};
 }
 
-// Whether the target is a body of revolution about `start`'s line, refined (RefineTurnLine).
-std::optional<ContinuousSymmetry> RoundAbout(const Octree& target, const TurnLine& start,
-                                             const SelfSymmetryOptions& options) {
+// Whether the target is a body of revolution about `line`.
+std::optional<ContinuousSymmetry> RoundAboutLine(const Octree& target, const TurnLine& line,
+                                                 const SelfSymmetryOptions& options) {
   const int depth = SymmetryDepth(target, target);
   const int steps = static_cast<int>(std::lround(360.0 / options.continuous_step_deg));
-  const TurnLine line =
-      options.refine_continuous_axis ? RefineTurnLine(target, start, options) : start;
   // The quarter and half turns first: a target that is not round about the line leaves many
   // nodes far under them (nearly every one does), and the other turns are not measured.
   std::vector<Eigen::Isometry3d> first;
@@ -214,11 +216,27 @@ std::optional<ContinuousSymmetry> RoundAbout(const Octree& target, const TurnLin
   return ContinuousSymmetry{line.axis, line.point, most};
 }
 
+// Whether the target is a body of revolution about `start`'s line refined (RefineTurnLine), or
+// about `start` itself where the refined line is another and does not pass (three turns'
+// lookups: a refinement that went astray does not lose a body the principal axis shows).
+std::optional<ContinuousSymmetry> RoundAbout(const Octree& target, const TurnLine& start,
+                                             const SelfSymmetryOptions& options,
+                                             TreeRefinementCache& cache) {
+  if (!options.refine_continuous_axis) return RoundAboutLine(target, start, options);
+  const TurnLine refined = RefineTurnLine(target, start, options, cache);
+  std::optional<ContinuousSymmetry> found = RoundAboutLine(target, refined, options);
+  if (found.has_value() || refined.axis == start.axis) return found;
+  return RoundAboutLine(target, start, options);
+}
+
 }  // namespace
 
 std::optional<ContinuousSymmetry> FindContinuousSymmetry(const Octree& target,
                                                          const SelfSymmetryOptions& options) {
-  if (target.max_depth() < 2 || target.num_points() == 0 || !(options.continuous_step_deg > 0.0)) {
+  // At least two turns (a step above 240 degrees would leave none to measure, and any round
+  // target would pass).
+  if (target.max_depth() < 2 || target.num_points() == 0 ||
+      !(options.continuous_step_deg > 0.0 && options.continuous_step_deg <= 120.0)) {
     return std::nullopt;
   }
   const PrincipalAxes principal = PrincipalAxesOf(target, options);
@@ -230,10 +248,11 @@ std::optional<ContinuousSymmetry> FindContinuousSymmetry(const Octree& target,
   std::array<int, 3> order = {0, 1, 2};
   std::sort(order.begin(), order.end(),
             [&](int a, int b) { return principal.roundness[a] > principal.roundness[b]; });
+  TreeRefinementCache cache;  // the target's cells and shapes, once for every axis tried
   for (int axis : order) {
     if (!principal.round[axis]) break;
     std::optional<ContinuousSymmetry> found =
-        RoundAbout(target, TurnLine{principal.axes.col(axis), principal.centre}, options);
+        RoundAbout(target, TurnLine{principal.axes.col(axis), principal.centre}, options, cache);
     if (found.has_value()) return found;
   }
   return std::nullopt;

@@ -84,8 +84,11 @@ struct SelfSymmetryOptions {
   // handle holds 3% of the points (RegistrarSecondStartTest's) read 0.04-0.27 on eight seeds of
   // a scratch run, and below 0.03 on some of that test's own (which failed without the breaking
   // nodes); those eight left 2-11 breaking nodes where they read below 0.05, vases and round
-  // tables none.
+  // tables none. (All about the principal axis. About the refined one, session 31, the seen
+  // split's vases and round tables read 0.001-0.023 and the unseen-class targets' least stayed a
+  // blob's 0.041; the mugs fell to 0.05-0.065 and kept 26-39 breaking nodes.)
   double max_continuous_far_fraction = 0.03;
+  // At most 120 (two turns at least; a coarser step finds nothing).
   double continuous_step_deg = 15.0;
   // The turns are about the axis the target registered onto itself turns about (from a quarter
   // turn about the principal axis), not the principal axis itself, which sampling tilts on squat
@@ -135,10 +138,12 @@ struct ContinuousSymmetry {
 // that axis leaves at most max_continuous_far_fraction of its nodes at SymmetryDepth without a
 // partner within far_cells, and no feature's nodes (fewer than min_breaking_nodes far under all
 // turns but breaking_max_turns_near: a cup's small tab tells its turns apart, and the round-axis
-// start finds it); the first axis so is returned; nullopt otherwise (and for trees shallower
-// than 2). A target without a round axis costs one eigen-decomposition; a round one, per round
-// axis tried, a shallow self-registration and three turns' node lookups (23 turns' and the
-// breaking nodes' where those three pass).
+// start finds it); the first axis so is returned (where the refined axis does not pass, the
+// principal one is measured too); nullopt otherwise (and for trees shallower than 2, or a
+// continuous_step_deg above 120). A target without a round axis costs one eigen-decomposition; a
+// round one, per round axis tried, a shallow self-registration and three turns' node lookups
+// (three more about the principal axis where the refined one fails them; 23 turns' and the
+// breaking nodes' where three pass).
 std::optional<ContinuousSymmetry> FindContinuousSymmetry(const Octree& target,
                                                          const SelfSymmetryOptions& options = {});
 

@@ -67,9 +67,10 @@ inline PointCloud Sphere(int n, uint64_t seed) {
 }
 
 // A vase-like body of revolution (radius 0.3 + 0.1 sin(2 z + 0.5) over z in [-1, 1]: elongated, so
-// that its principal axis, which FindContinuousSymmetry turns about, is estimated to within about
-// a degree) about `axis` through (0.1, -0.05, 0.2); with `handle`, a cup's small one: a half ring
-// of a tube on its side takes every 32nd point, which no turn about the axis maps onto itself.
+// that its principal axis, from which FindContinuousSymmetry's self-registration starts, is
+// estimated to within about a degree) about `axis` through (0.1, -0.05, 0.2); with `handle`, a
+// cup's small one: a half ring of a tube on its side takes every 32nd point, which no turn about
+// the axis maps onto itself.
 inline PointCloud BodyOfRevolution(int n, uint64_t seed, const Eigen::Vector3d& axis,
                                    bool handle = false) {
   std::mt19937_64 rng(seed);

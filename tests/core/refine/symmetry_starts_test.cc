@@ -96,6 +96,10 @@ TEST(SymmetryStartsTest, ABodyOfRevolutionIsFoundAboutItsAxisAndAMugIsNot) {
     EXPECT_LE(found->max_far_fraction, SelfSymmetryOptions{}.max_continuous_far_fraction);
     const Eigen::Vector3d centre = vase.level(0).center_of_mass[0].cast<double>();
     EXPECT_LT((found->centre - centre).norm(), 1e-9);
+    // A step that leaves fewer than two turns measures nothing, so nothing is found.
+    SelfSymmetryOptions coarse_step;
+    coarse_step.continuous_step_deg = 200.0;
+    EXPECT_FALSE(FindContinuousSymmetry(vase, coarse_step).has_value()) << "seed " << seed;
     // Every 32nd point on a small handle: no turn maps it onto itself, and its nodes stay far
     // under nearly every turn.
     const Octree mug = RefinementTree(testing_util::BodyOfRevolution(1024, seed, axis, true), 6);
