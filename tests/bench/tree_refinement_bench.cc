@@ -28,6 +28,7 @@
 #include "core/data/registration_metrics.h"
 #include "core/data/transform_convention.h"
 #include "core/refine/node_closeness.h"
+#include "core/refine/symmetry_starts.h"
 #include "core/refine/tree_refinement.h"
 #include "core/synth/lidar_sequence.h"
 #include "core/synth/lidar_simulator.h"
@@ -148,32 +149,41 @@ void BM_LineShapedFraction(benchmark::State& state) {
 }
 BENCHMARK(BM_LineShapedFraction)->ArgName("depth")->Arg(9)->Unit(benchmark::kMillisecond);
 
-// What telling two equally fitting answers apart costs (MeanNodeDistanceCells, run for each of two
-// starts' answers when they differ): on BM_RefineLidar's depth-9 scan pair and on a 1,024-point
-// object pair at depth 6, at the true pose.
-void BM_MeanNodeDistance(benchmark::State& state) {
-  const bool lidar = state.range(0) != 0;
+// The node-closeness benchmarks' pairs at the true pose: BM_RefineLidar's depth-9 scan pair, or a
+// 1,024-point object pair at depth 6.
+struct PairAtTruth {
   Octree source;
   Octree target;
-  Eigen::Isometry3d truth;
-  int depth = 0;
+  Eigen::Isometry3d truth = Eigen::Isometry3d::Identity();
+  int depth = 0;  // the trees'
+};
+
+PairAtTruth ClosenessPair(bool lidar) {
+  PairAtTruth p;
   if (lidar) {
-    depth = 9;
-    target = TreeOf(Thinned(Drive().SimulateFrame(10).cloud, 120'000), depth);
-    source = TreeOf(Thinned(Drive().SimulateFrame(15).cloud, 120'000), depth);
-    truth = TruthOf(10, 15);
+    p.depth = 9;
+    p.target = TreeOf(Thinned(Drive().SimulateFrame(10).cloud, 120'000), p.depth);
+    p.source = TreeOf(Thinned(Drive().SimulateFrame(15).cloud, 120'000), p.depth);
+    p.truth = TruthOf(10, 15);
   } else {
-    depth = 6;
+    p.depth = 6;
     PairOptions options;
     auto pair = MakeObjectPair(options, 1);
     if (!pair.ok()) std::abort();
-    source = TreeOf(pair->source, depth);
-    target = TreeOf(pair->target, depth);
-    truth = pair->T_target_source;
+    p.source = TreeOf(pair->source, p.depth);
+    p.target = TreeOf(pair->target, p.depth);
+    p.truth = pair->T_target_source;
   }
+  return p;
+}
+
+// What telling two equally fitting answers apart costs (MeanNodeDistanceCells, run for each of two
+// starts' answers when they differ), on ClosenessPair's pairs.
+void BM_MeanNodeDistance(benchmark::State& state) {
+  const PairAtTruth p = ClosenessPair(state.range(0) != 0);
   double cells = 0.0;
   for (auto _ : state) {
-    cells = MeanNodeDistanceCells(source, target, truth, depth);
+    cells = MeanNodeDistanceCells(p.source, p.target, p.truth, p.depth);
     benchmark::DoNotOptimize(cells);
   }
   state.counters["mean_cells"] = cells;
@@ -182,41 +192,27 @@ BENCHMARK(BM_MeanNodeDistance)->ArgName("lidar")->Arg(0)->Arg(1)->Unit(benchmark
 
 // The confidence's turn contrast (confidence_model.cc's TurnContrast, run for every answer the
 // registrar settles): FarNodeFractions over the true pose and its six 45-degree turns about the
-// moved source's centre, 512 nodes one depth above the finest, on the same pairs.
+// moved source's centre, 512 nodes one depth above the finest (SymmetryDepth), on the same pairs.
 void BM_FarNodeFractions(benchmark::State& state) {
-  const bool lidar = state.range(0) != 0;
-  Octree source;
-  Octree target;
-  Eigen::Isometry3d truth;
-  if (lidar) {
-    target = TreeOf(Thinned(Drive().SimulateFrame(10).cloud, 120'000), 9);
-    source = TreeOf(Thinned(Drive().SimulateFrame(15).cloud, 120'000), 9);
-    truth = TruthOf(10, 15);
-  } else {
-    PairOptions options;
-    auto pair = MakeObjectPair(options, 1);
-    if (!pair.ok()) std::abort();
-    source = TreeOf(pair->source, 6);
-    target = TreeOf(pair->target, 6);
-    truth = pair->T_target_source;
-  }
-  const Eigen::Vector3d pivot = truth * source.level(0).center_of_mass[0].cast<double>();
-  std::vector<Eigen::Isometry3d> poses = {truth};
+  const PairAtTruth p = ClosenessPair(state.range(0) != 0);
+  const Eigen::Vector3d pivot = p.truth * p.source.level(0).center_of_mass[0].cast<double>();
+  std::vector<Eigen::Isometry3d> poses = {p.truth};
   for (int axis = 0; axis < 3; ++axis) {
     for (double sign : {-1.0, 1.0}) {
       const Eigen::AngleAxisd turn(sign * M_PI / 4.0, Eigen::Vector3d::Unit(axis));
       Eigen::Isometry3d about = Eigen::Isometry3d::Identity();
       about.linear() = turn.toRotationMatrix();
       about.translation() = pivot - turn * pivot;
-      poses.push_back(about * truth);
+      poses.push_back(about * p.truth);
     }
   }
-  const int depth = std::min(source.max_depth(), target.max_depth()) - 1;
+  const int depth = SymmetryDepth(p.source, p.target);
+  const double far_cells = SelfSymmetryOptions{}.far_cells;
   NodeClosenessOptions sample;
   sample.max_source_nodes = 512;
   std::vector<double> far;
   for (auto _ : state) {
-    far = FarNodeFractions(source, target, poses, depth, 1.9, sample);
+    far = FarNodeFractions(p.source, p.target, poses, depth, far_cells, sample);
     benchmark::DoNotOptimize(far.data());
   }
   state.counters["far_at_truth"] = far.front();
