@@ -129,6 +129,7 @@ void ToProto(const RegisterOptions& in, rpsr::v1::RegisterOptions* out) {
   out->set_deadline_seconds(absl::ToDoubleSeconds(in.server_deadline));
   out->set_refine_from_initial(in.refine_from_initial);
   out->set_search_scene_start(in.search_scene_start);
+  out->set_later_passes_when_unconfident(in.later_passes_when_unconfident);
   out->set_symmetric_starts(in.symmetric_starts);
   out->set_round_axis_start(in.round_axis_start);
   out->set_sensor_aligned_check(in.sensor_aligned_check);

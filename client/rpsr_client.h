@@ -146,6 +146,9 @@ struct RegisterOptions {
   // the network's start is not confident; search a start about z on scene-scale trees.
   bool refine_from_initial = true;
   bool search_scene_start = true;
+  // Run the network's later passes only when the first pass's answer is not confident, and
+  // refine their estimate too (proto RegisterOptions.later_passes_when_unconfident).
+  bool later_passes_when_unconfident = true;
   // Refine the answer turned by the target's near-symmetry under which the features that break
   // it meet (a gear's pin) too (proto RegisterOptions.symmetric_starts).
   bool symmetric_starts = true;

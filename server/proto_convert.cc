@@ -94,6 +94,9 @@ absl::StatusOr<core::RegistrationOptions> OptionsFromProto(const v1::RegisterOpt
                                                    proto.deadline_seconds(),
                                                    "; a finite number >= 0 expected"));
   }
+  if (proto.has_later_passes_when_unconfident()) {
+    options.later_passes_only_when_unconfident = proto.later_passes_when_unconfident();
+  }
   if (proto.has_refine_from_initial())
     options.also_refine_from_initial = proto.refine_from_initial();
   if (proto.has_search_scene_start()) options.search_scene_start = proto.search_scene_start();

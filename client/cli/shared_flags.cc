@@ -44,6 +44,10 @@ ABSL_FLAG(int, passes, 0,
           "network passes (Sec. 3.3); 0: 3 for train; elsewhere the mode's default: the "
           "model's own number for net, 2 for net+refine");
 ABSL_FLAG(int, threads, 1, "LibTorch intra-op threads");
+ABSL_FLAG(bool, later_passes_when_unconfident, true,
+          "eval, register, odometry, bench, net+refine: refine the first network pass's estimate "
+          "first and run the later passes only when that answer is below 0.9 confidence, "
+          "refining their estimate as a further start (false: every pass first, one start)");
 ABSL_FLAG(bool, refine_from_initial, true,
           "eval, register, odometry, bench, net+refine: when the answer refined from the network's "
           "estimate is below 0.9 confidence, refine from the initial guess (or identity) too and "
@@ -112,6 +116,7 @@ namespace rpsr::client {
 
 void ApplyRegistrationFlags(core::RegistrationOptions& options) {
   options.passes = absl::GetFlag(FLAGS_passes);
+  options.later_passes_only_when_unconfident = absl::GetFlag(FLAGS_later_passes_when_unconfident);
   options.also_refine_from_initial = absl::GetFlag(FLAGS_refine_from_initial);
   options.search_scene_start = absl::GetFlag(FLAGS_search_scene_start);
   options.try_symmetric_starts = absl::GetFlag(FLAGS_symmetric_starts);

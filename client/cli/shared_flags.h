@@ -26,6 +26,7 @@ ABSL_DECLARE_FLAG(std::string, disturbance);
 ABSL_DECLARE_FLAG(int, level);
 ABSL_DECLARE_FLAG(int, batch_size);
 ABSL_DECLARE_FLAG(int, passes);
+ABSL_DECLARE_FLAG(bool, later_passes_when_unconfident);
 ABSL_DECLARE_FLAG(bool, refine_from_initial);
 ABSL_DECLARE_FLAG(bool, search_scene_start);
 ABSL_DECLARE_FLAG(bool, symmetric_starts);

@@ -60,6 +60,13 @@ struct RegistrationOptions {
   // Network passes; <= 0: the mode's default, DefaultPasses (net: the model's own,
   // RpsrNetConfig::passes; net+refine: at most kNetRefinePasses).
   int passes = 0;
+  // net+refine with more than one pass: the first pass's estimate is refined first, and the
+  // later passes run (from that estimate) only when that answer's confidence is below 0.9; their
+  // estimate is then refined as a further start ("network_later_passes") and settled by the
+  // usual rule. An answer confident after one pass skips a pass (a quarter of an object pair's
+  // time); an unconfident one gets both passes' estimates as starts. false: every pass first,
+  // one start from the last (the pipeline before session 32). See kNetRefinePasses for figures.
+  bool later_passes_only_when_unconfident = true;
   // A starting guess of T_target_source. The network starts from it (its passes estimate the
   // remaining motion); `refine` starts from it (identity when absent).
   std::optional<Eigen::Isometry3d> initial_T_target_source;
@@ -185,21 +192,23 @@ struct RegistrationResult {
   // ground without a partner. The answer stays the caller's start refined, its confidence capped.
   std::optional<Eigen::Isometry3d> structure_alternative_T_target_source;
   // The network's estimate before refinement (identity / the initial guess in mode kRefine) and
-  // its mean peak score (an input of the confidence).
+  // its mean peak score (an input of the confidence), after every pass that ran (net+refine: the
+  // first alone when its answer was confident, later_passes_only_when_unconfident).
   Eigen::Isometry3d net_T_target_source = Eigen::Isometry3d::Identity();
   double net_score_peak = 0.0;
   RegistrationMode mode = RegistrationMode::kNetRefine;
   // Where the returned pose's refinement started: "network" (net+refine's first start; mode net's
-  // single evaluation), "initial" (the caller's guess or identity: mode refine's only start,
-  // net+refine's second), "searched" (net+refine's third on scene-scale trees,
-  // RegistrationOptions::search_scene_start), "searched_turns" (its fourth there, the same search
-  // over every turn), "structure" (a further one there, the
-  // sensor-aligned check's: check_sensor_aligned_answers), "round_axis" (its third on
-  // object-scale trees without near-symmetries, search_round_axis_start) or "symmetric" (its
-  // third on those with, try_symmetric_starts); and how many starts were refined for this pair
-  // (1-5 on scene-scale trees, 1-3 on object-scale ones; in mode refine 1, or 2 when the
-  // sensor-aligned check refined another start to doubt the answer; 0 when the pipeline stopped
-  // before refining: the network's output not finite).
+  // single evaluation), "network_later_passes" (net+refine's deferred passes' estimate,
+  // RegistrationOptions::later_passes_only_when_unconfident), "initial" (the caller's guess or
+  // identity: mode refine's only start, net+refine's second), "searched" (net+refine's third on
+  // scene-scale trees, RegistrationOptions::search_scene_start), "searched_turns" (its fourth
+  // there, the same search over every turn), "structure" (a further one there, the sensor-aligned
+  // check's: check_sensor_aligned_answers), "round_axis" (its third on object-scale trees without
+  // near-symmetries, search_round_axis_start) or "symmetric" (its third on those with,
+  // try_symmetric_starts); and how many starts were refined for this pair (1-5 on scene-scale
+  // trees, 1-3 on object-scale ones; in mode refine 1, or 2 when the sensor-aligned check refined
+  // another start to doubt the answer; 0 when the pipeline stopped before refining: the network's
+  // output not finite).
   std::string start = "network";
   int starts = 0;
   RegistrationTimings timings;

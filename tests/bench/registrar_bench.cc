@@ -210,6 +210,24 @@ BENCHMARK(BM_RegisterObjectsNoNoisePolish)
     ->Arg(static_cast<int>(RegistrationMode::kRefine))
     ->Unit(benchmark::kMillisecond);
 
+// net+refine with every network pass run before refining (later_passes:0, the pipeline before
+// session 32) and with the later passes only for an unconfident first answer (later_passes:1,
+// the default: RegistrationOptions::later_passes_only_when_unconfident), on the objects
+// (lidar:0), their jittered copies (lidar:2) and the scans (lidar:1).
+void BM_RegisterLaterPasses(benchmark::State& state) {
+  const int64_t kind = state.range(1);
+  const bool later = state.range(2) != 0;
+  const TreePairs& trees =
+      kind == 1 ? LidarTrees() : (kind == 2 ? JitteredObjectTrees() : ObjectTrees());
+  RunRegister(state, trees, false, SharedRegistrar(), {}, [later](RegistrationOptions& options) {
+    options.later_passes_only_when_unconfident = later;
+  });
+}
+BENCHMARK(BM_RegisterLaterPasses)
+    ->ArgNames({"mode", "lidar", "later_passes"})
+    ->ArgsProduct({{static_cast<int>(RegistrationMode::kNetRefine)}, {0, 2, 1}, {0, 1}})
+    ->Unit(benchmark::kMillisecond);
+
 // Objects jittered by 0.08, with the noise polish (polish:1) and without (polish:0).
 void BM_RegisterJitteredObjects(benchmark::State& state) {
   RunRegister(state, JitteredObjectTrees(), false, SharedRegistrar(),

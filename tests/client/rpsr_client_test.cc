@@ -160,12 +160,13 @@ TEST_F(RpsrClientTest, UploadsInChunksAndRegistersByIds) {
   EXPECT_GT(result->round_trip_seconds, 0.0);
   EXPECT_GE(result->timings.batch_size, 1u);
   EXPECT_GE(result->starts, 1);
-  EXPECT_TRUE(result->start == "network" || result->start == "initial" ||
-              result->start == "round_axis")
+  EXPECT_TRUE(result->start == "network" || result->start == "network_later_passes" ||
+              result->start == "initial" || result->start == "round_axis")
       << result->start;
   // The later starts' switches reach the server: with all off, one start, the network's.
   RegisterOptions first_start_only;
   first_start_only.refine_from_initial = false;
+  first_start_only.later_passes_when_unconfident = false;
   first_start_only.search_scene_start = false;
   first_start_only.round_axis_start = false;
   first_start_only.sensor_aligned_check = false;

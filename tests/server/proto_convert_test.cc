@@ -164,6 +164,19 @@ TEST(ProtoConvertTest, LaterStartsAreOnUnlessTurnedOff) {
   EXPECT_TRUE(options->search_scene_start);
 }
 
+// The later network passes wait for an unconfident first answer (since session 32) unless a
+// client turns that off.
+TEST(ProtoConvertTest, LaterPassesWaitForAnUnconfidentAnswerUnlessTurnedOff) {
+  auto options = OptionsFromProto({});
+  ASSERT_TRUE(options.ok());
+  EXPECT_TRUE(options->later_passes_only_when_unconfident);
+  v1::RegisterOptions proto;
+  proto.set_later_passes_when_unconfident(false);
+  options = OptionsFromProto(proto);
+  ASSERT_TRUE(options.ok());
+  EXPECT_FALSE(options->later_passes_only_when_unconfident);
+}
+
 // The symmetric start is on (since session 29) unless a client turns it off.
 TEST(ProtoConvertTest, SymmetricStartsAreOnUnlessTurnedOff) {
   auto options = OptionsFromProto({});
