@@ -52,7 +52,9 @@ absl::string_view RegistrationModeName(RegistrationMode mode);
 // 102 vs 104 of 128; the KITTI-style K1/K2 pairs 1.000 / 1.000 either way. Pooled over the
 // object sets, 2 passes lose about 0.4% of the pairs for 16% of the time. Two rather than one:
 // the confidence reads how much the last pass still moved (ConfidenceFeatureVector), which one
-// pass cannot say. A caller who wants the third pass asks for it (passes = 3).
+// pass cannot say. A caller who wants the third pass asks for it (passes = 3). Since session 32
+// the passes after the first run only for an unconfident first answer
+// (RegistrationOptions::later_passes_only_when_unconfident), so a confident pair pays one pass.
 inline constexpr int kNetRefinePasses = 2;
 
 struct RegistrationOptions {
