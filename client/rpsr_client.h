@@ -223,10 +223,9 @@ struct RegistrationResult {
   Eigen::Isometry3d net_T_target_source = Eigen::Isometry3d::Identity();
   double net_score_peak = 0.0;
   std::string mode;
-  // Where the returned pose's refinement started ("network", "initial", "searched",
-  // "searched_turns", "structure",
-  // "round_axis", "symmetric") and how many starts the server refined for this pair (proto
-  // RegistrationResult.start, .starts).
+  // Where the returned pose's refinement started ("network", "network_later_passes", "initial",
+  // "searched", "searched_turns", "structure", "round_axis", "symmetric") and how many starts the
+  // server refined for this pair (proto RegistrationResult.start, .starts).
   std::string start;
   int starts = 0;
   ServerTimings timings;

@@ -27,8 +27,8 @@ struct PairReport {
   double inlier_rmse = 0.0;
   int iterations = 0;
   std::string mode;
-  std::string start;  // where it started: network, initial, searched, structure, round_axis,
-                      // symmetric
+  std::string start;  // where it started: network, network_later_passes, initial, searched,
+                      // searched_turns, structure, round_axis, symmetric
   int starts = 0;     // refinement starts tried for this pair
   // Degenerate, and kept at the initial guess along the unconstrained directions.
   bool held_at_initial = false;

@@ -45,6 +45,7 @@ absl::StatusOr<bool> UseServerFlag() {
 void ApplyRegistrationFlags(RegisterOptions& options) {
   options.passes = absl::GetFlag(FLAGS_passes);
   options.refine_from_initial = absl::GetFlag(FLAGS_refine_from_initial);
+  options.later_passes_when_unconfident = absl::GetFlag(FLAGS_later_passes_when_unconfident);
   options.search_scene_start = absl::GetFlag(FLAGS_search_scene_start);
   options.symmetric_starts = absl::GetFlag(FLAGS_symmetric_starts);
   options.round_axis_start = absl::GetFlag(FLAGS_round_axis_start);

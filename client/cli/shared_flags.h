@@ -53,7 +53,8 @@ std::optional<core::DisturbanceKind> ParseDisturbanceFlag(const std::string& nam
 std::optional<core::ObjectSplit> ParseObjectSplitFlag(const std::string& name,
                                                       core::ObjectSplit empty_means);
 
-// The registration flags the subcommands share (--passes, --refine_from_initial,
+// The registration flags the subcommands share (--passes, --later_passes_when_unconfident,
+// --refine_from_initial,
 // --search_scene_start, --symmetric_starts, --round_axis_start, --sensor_aligned_check,
 // --rebin_coarse_depths, --joint_finest_stage, --noise_polish, --coarse_wide_search,
 // --line_normals_from_planes, --hold_degenerate_at_initial) set on `options`; its mode and initial

@@ -54,7 +54,9 @@ absl::string_view RegistrationModeName(RegistrationMode mode);
 // the confidence reads how much the last pass still moved (ConfidenceFeatureVector), which one
 // pass cannot say. A caller who wants the third pass asks for it (passes = 3). Since session 32
 // the passes after the first run only for an unconfident first answer
-// (RegistrationOptions::later_passes_only_when_unconfident), so a confident pair pays one pass.
+// (RegistrationOptions::later_passes_only_when_unconfident), so a confident pair pays one pass
+// and its confidence is read without a last-pass change (one pass alone, every answer's, had
+// lost recall on two of three seeds: evaluation-notes.md).
 inline constexpr int kNetRefinePasses = 2;
 
 struct RegistrationOptions {
@@ -64,10 +66,15 @@ struct RegistrationOptions {
   int passes = 0;
   // net+refine with more than one pass: the first pass's estimate is refined first, and the
   // later passes run (from that estimate) only when that answer's confidence is below 0.9; their
-  // estimate is then refined as a further start ("network_later_passes") and settled by the
-  // usual rule. An answer confident after one pass skips a pass (a quarter of an object pair's
-  // time); an unconfident one gets both passes' estimates as starts. false: every pass first,
-  // one start from the last (the pipeline before session 32). See kNetRefinePasses for figures.
+  // estimate is then refined as a further start ("network_later_passes"), which replaces the
+  // first answer unless that one is clearly better or, fitting alike, closer: the usual rule
+  // with the roles swapped, since the later
+  // answer is what every pass first would have returned. An answer confident after one pass
+  // skips a pass (about a sixth of an object pair's time; its confidence features read no
+  // last-pass change, and the calibration is fitted on this pipeline); an unconfident one gets
+  // both passes' estimates as starts. false: every pass first, one start from the last (the
+  // pipeline before session 32). Figures: tests/bench/notes/evaluation-notes.md, *The later
+  // passes only for an unconfident first answer*.
   bool later_passes_only_when_unconfident = true;
   // A starting guess of T_target_source. The network starts from it (its passes estimate the
   // remaining motion); `refine` starts from it (identity when absent).
@@ -195,7 +202,8 @@ struct RegistrationResult {
   std::optional<Eigen::Isometry3d> structure_alternative_T_target_source;
   // The network's estimate before refinement (identity / the initial guess in mode kRefine) and
   // its mean peak score (an input of the confidence), after every pass that ran (net+refine: the
-  // first alone when its answer was confident, later_passes_only_when_unconfident).
+  // first alone when its answer was confident, later_passes_only_when_unconfident; an answer
+  // kept from the first pass's start keeps the confidence features measured with it).
   Eigen::Isometry3d net_T_target_source = Eigen::Isometry3d::Identity();
   double net_score_peak = 0.0;
   RegistrationMode mode = RegistrationMode::kNetRefine;
@@ -207,8 +215,8 @@ struct RegistrationResult {
   // there, the same search over every turn), "structure" (a further one there, the sensor-aligned
   // check's: check_sensor_aligned_answers), "round_axis" (its third on object-scale trees without
   // near-symmetries, search_round_axis_start) or "symmetric" (its third on those with,
-  // try_symmetric_starts); and how many starts were refined for this pair (1-5 on scene-scale
-  // trees, 1-3 on object-scale ones; in mode refine 1, or 2 when the sensor-aligned check refined
+  // try_symmetric_starts); and how many starts were refined for this pair (1-6 on scene-scale
+  // trees, 1-4 on object-scale ones; in mode refine 1, or 2 when the sensor-aligned check refined
   // another start to doubt the answer; 0 when the pipeline stopped before refining: the network's
   // output not finite).
   std::string start = "network";
