@@ -124,8 +124,8 @@ std::string ChooseMode(const core::PointCloud& source, const core::PointCloud& t
   if (why != nullptr) {
     *why = scene && object_model
                ? "the default; scene-scale clouds and an object model: the refinement starts "
-                 "from the network's estimate and, unless that is confident, from the identity "
-                 "and from a searched start"
+                 "from the network's first pass and, unless that is confident, from its second "
+                 "pass, the identity and a searched start"
                : "the default";
   }
   return "net+refine";
