@@ -69,8 +69,9 @@ enum ConfidenceFeature {
 const std::vector<std::string>& ConfidenceFeatureNames();
 
 // What the features are computed from. `refinement` is the refinement's (or, in mode net, the
-// measuring evaluation's) result; `net_per_pass` the network's estimates after each pass (empty in
-// mode refine); `refine_start` the transform the refinement started from.
+// measuring evaluation's) result; `net_per_pass` the network's estimates after each pass run (empty
+// in mode refine; one in net+refine when the later passes did not run, and then the last-pass
+// change features read 0); `refine_start` the transform the refinement started from.
 struct ConfidenceInputs {
   const RegistrationResult* result = nullptr;
   const TreeRefinementResult* refinement = nullptr;

@@ -478,15 +478,27 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   auto closeness = [&](const TreeRefinementResult& r) {
     return MeanNodeDistanceCells(source, target, r.T_target_source, finest_depth);
   };
-  auto try_start = [&](const Eigen::Isometry3d& start_pose, const char* name) {
+  // `replaces_unless_worse`: the roles of the rule swapped, the start's answer replacing the one
+  // so far unless that one is clearly better or, fitting alike, closer (no twin rule).
+  auto try_start = [&](const Eigen::Isometry3d& start_pose, const char* name,
+                       bool replaces_unless_worse = false) {
     absl::StatusOr<TreeRefinementResult> r =
         RefineWithFallback(source, target, start_pose, refinement, cache);
     ++result.starts;
     if (!r.ok()) return;
     std::optional<double> r_closeness;
     bool take = false;
-    if (r->valid && best.valid &&
-        AreSymmetricTwins(source, target, r->T_target_source, best.T_target_source, symmetries)) {
+    if (replaces_unless_worse) {
+      take = !ClearlyBetter(best, *r);
+      if (take && r->valid && best.valid && !ClearlyBetter(*r, best) &&
+          !NearlyEqual(r->T_target_source, best.T_target_source, source, target)) {
+        if (!best_closeness) best_closeness = closeness(best);
+        r_closeness = closeness(*r);
+        take = !Closer(*best_closeness, *r_closeness);
+      }
+    } else if (r->valid && best.valid &&
+               AreSymmetricTwins(source, target, r->T_target_source, best.T_target_source,
+                                 symmetries)) {
       // Twins (a gear a tooth apart) fit alike by fitness and node distance; the few nodes of the
       // feature that breaks the symmetry decide (symmetry_starts.h).
       const SelfSymmetryOptions twin;
@@ -513,7 +525,8 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   // from the first pass's estimate only when its answer is not confident, their estimate refined
   // as a further start. Their time is the network's, not the refinement's.
   double deferred_net_seconds = 0.0;
-  if (net_refine && net_output != nullptr && net_output->deferred_passes > 0 &&
+  // (deferred_passes is set for net+refine requests only, DefersLaterPasses.)
+  if (net_output != nullptr && net_output->deferred_passes > 0 &&
       result.confidence < kConfidentEnough) {
     NetPair pair = net_output->pair;
     pair.initial = net_output->estimate.T_target_source;
@@ -527,35 +540,12 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
       // The network's estimate of all its passes, whichever start the answer comes from.
       result.net_T_target_source = estimate.T_target_source;
       result.net_score_peak = estimate.score_peak;
-      // The later passes' answer is what every pass first would have returned, so the roles of
-      // the usual rule are swapped: it replaces the first answer unless the first is clearly
-      // better or, fitting alike, has its finest nodes closer. (With the usual rule the first
-      // answer stayed where the two fit alike, and on the unseen study's clean pairs, answers
-      // slid or turned along a near-symmetry, 2-4 of 100 were lost a seed.) Twins are not told
-      // apart here by their breaking nodes as try_start does: the symmetric start below does
-      // that for the answer kept. (Mirroring try_start's twin rule here, keeping the network's
-      // fields at the first pass's when the first answer stays, and skipping the initial start
-      // where it nearly meets the later estimate, refitted together, read worse on the unseen
-      // study's seed 3 and the held-out LiDAR pairs: evaluation-notes.md.)
-      absl::StatusOr<TreeRefinementResult> r =
-          RefineWithFallback(source, target, estimate.T_target_source, refinement, cache);
-      ++result.starts;
-      if (r.ok()) {
-        bool keep_first = ClearlyBetter(best, *r);
-        std::optional<double> r_closeness;
-        if (!keep_first && r->valid && best.valid && !ClearlyBetter(*r, best) &&
-            !NearlyEqual(r->T_target_source, best.T_target_source, source, target)) {
-          if (!best_closeness) best_closeness = closeness(best);
-          r_closeness = closeness(*r);
-          keep_first = Closer(*best_closeness, *r_closeness);
-        }
-        if (!keep_first) {
-          settle(*r, estimate.T_target_source, result);
-          result.start = "network_later_passes";
-          best = *std::move(r);
-          best_closeness = r_closeness;
-        }
-      }
+      // The later passes' answer is what every pass first would have returned, so it replaces
+      // the first answer unless that one is clearly better or closer (with the usual rule the
+      // first answer stayed where the two fit alike, and 2-4 of 100 clean unseen pairs were lost
+      // a seed). Twins are left to the symmetric start below. The variants measured and not
+      // kept: evaluation-notes.md, *The later passes only for an unconfident first answer*.
+      try_start(estimate.T_target_source, "network_later_passes", /*replaces_unless_worse=*/true);
     }
   }
   // The second start (RegistrationOptions::also_refine_from_initial) runs only when the first

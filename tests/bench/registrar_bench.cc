@@ -213,7 +213,7 @@ BENCHMARK(BM_RegisterObjectsNoNoisePolish)
 // net+refine with every network pass run before refining (later_passes:0, the pipeline before
 // session 32) and with the later passes only for an unconfident first answer (later_passes:1,
 // the default: RegistrationOptions::later_passes_only_when_unconfident), on the objects
-// (lidar:0), their jittered copies (lidar:2) and the scans (lidar:1).
+// (pairs:0), their jittered copies (pairs:2) and the scans (pairs:1).
 void BM_RegisterLaterPasses(benchmark::State& state) {
   const int64_t kind = state.range(1);
   const bool later = state.range(2) != 0;
@@ -224,7 +224,7 @@ void BM_RegisterLaterPasses(benchmark::State& state) {
   });
 }
 BENCHMARK(BM_RegisterLaterPasses)
-    ->ArgNames({"mode", "lidar", "later_passes"})
+    ->ArgNames({"mode", "pairs", "later_passes"})
     ->ArgsProduct({{static_cast<int>(RegistrationMode::kNetRefine)}, {0, 2, 1}, {0, 1}})
     ->Unit(benchmark::kMillisecond);
 
