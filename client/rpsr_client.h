@@ -155,6 +155,9 @@ struct RegisterOptions {
   // Refine the answer turned about the target's round axis too, when not confident (proto
   // RegisterOptions.round_axis_start).
   bool round_axis_start = true;
+  // Refine the answer stepped along its weakest direction too, when that leaves clearly fewer
+  // nodes without a partner (proto RegisterOptions.weak_direction_start).
+  bool weak_direction_start = true;
   // Check a scene-scale answer that puts the two sensors together against a search over the
   // structure off the ground (proto RegisterOptions.sensor_aligned_check); in mode refine a
   // losing answer is kept but doubted (confidence capped, failure_reason naming the other pose).
@@ -224,8 +227,8 @@ struct RegistrationResult {
   double net_score_peak = 0.0;
   std::string mode;
   // Where the returned pose's refinement started ("network", "network_later_passes", "initial",
-  // "searched", "searched_turns", "structure", "round_axis", "symmetric") and how many starts the
-  // server refined for this pair (proto RegistrationResult.start, .starts).
+  // "searched", "searched_turns", "structure", "round_axis", "weak_direction", "symmetric") and
+  // how many starts the server refined for this pair (proto RegistrationResult.start, .starts).
   std::string start;
   int starts = 0;
   ServerTimings timings;

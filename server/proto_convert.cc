@@ -102,6 +102,9 @@ absl::StatusOr<core::RegistrationOptions> OptionsFromProto(const v1::RegisterOpt
   if (proto.has_search_scene_start()) options.search_scene_start = proto.search_scene_start();
   if (proto.has_symmetric_starts()) options.try_symmetric_starts = proto.symmetric_starts();
   if (proto.has_round_axis_start()) options.search_round_axis_start = proto.round_axis_start();
+  if (proto.has_weak_direction_start()) {
+    options.search_weak_direction_start = proto.weak_direction_start();
+  }
   if (proto.has_sensor_aligned_check()) {
     options.check_sensor_aligned_answers = proto.sensor_aligned_check();
   }

@@ -49,6 +49,7 @@ void ApplyRegistrationFlags(RegisterOptions& options) {
   options.search_scene_start = absl::GetFlag(FLAGS_search_scene_start);
   options.symmetric_starts = absl::GetFlag(FLAGS_symmetric_starts);
   options.round_axis_start = absl::GetFlag(FLAGS_round_axis_start);
+  options.weak_direction_start = absl::GetFlag(FLAGS_weak_direction_start);
   options.sensor_aligned_check = absl::GetFlag(FLAGS_sensor_aligned_check);
   options.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
   options.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);

@@ -62,6 +62,11 @@ ABSL_FLAG(bool, round_axis_start, true,
           "below 0.9 confidence and the target is round about a principal axis (a cup with a "
           "tab), also refine the answer turned about that axis to where it leaves the fewest "
           "nodes without a partner, and keep the clearly better answer");
+ABSL_FLAG(bool, weak_direction_start, true,
+          "eval, register, odometry, bench, net+refine on object-scale trees without "
+          "near-symmetries: also refine the answer stepped along its weakest direction (a "
+          "spring's screw, a slide along a face) when that leaves clearly fewer nodes without a "
+          "partner, and keep it when it still does");
 ABSL_FLAG(bool, sensor_aligned_check, true,
           "eval, register, odometry, bench, net+refine on scene-scale trees: when the answer puts "
           "the two sensors within a search cell of each other and both clouds have a ground, "
@@ -121,6 +126,7 @@ void ApplyRegistrationFlags(core::RegistrationOptions& options) {
   options.search_scene_start = absl::GetFlag(FLAGS_search_scene_start);
   options.try_symmetric_starts = absl::GetFlag(FLAGS_symmetric_starts);
   options.search_round_axis_start = absl::GetFlag(FLAGS_round_axis_start);
+  options.search_weak_direction_start = absl::GetFlag(FLAGS_weak_direction_start);
   options.check_sensor_aligned_answers = absl::GetFlag(FLAGS_sensor_aligned_check);
   options.refinement.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
   options.refinement.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);

@@ -59,6 +59,14 @@ std::vector<double> FarNodeFractions(const Octree& source, const Octree& target,
                                      const std::vector<Eigen::Isometry3d>& poses, int depth,
                                      double far_cells, const NodeClosenessOptions& options = {});
 
+// Per pose: the mean of FarNodeFractions from the source to the target under the pose and from
+// the target to the source under its inverse (a feature a wrong pose misplaces is missed on both
+// sides, while a node only one cloud sampled is missed on one). Negative where either side cannot
+// be measured.
+std::vector<double> TwoWayFarNodeFractions(const Octree& source, const Octree& target,
+                                           const std::vector<Eigen::Isometry3d>& poses, int depth,
+                                           double far_cells);
+
 // Marks (1) each node of the source's `depth` that lies farther than `far_cells` (below kCapCells)
 // from every target CoM of `depth` under all but at most `max_near` of the poses; every node is
 // visited (no sampling). With the poses a target's near-symmetries, the marked nodes are the

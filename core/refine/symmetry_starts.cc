@@ -264,17 +264,7 @@ namespace {
 std::vector<double> TwoWayFarFractions(const Octree& source, const Octree& target,
                                        const std::vector<Eigen::Isometry3d>& poses,
                                        double far_cells) {
-  const int depth = SymmetryDepth(source, target);
-  std::vector<Eigen::Isometry3d> inverses;
-  inverses.reserve(poses.size());
-  for (const Eigen::Isometry3d& T : poses) inverses.push_back(T.inverse());
-  const std::vector<double> there = FarNodeFractions(source, target, poses, depth, far_cells);
-  const std::vector<double> back = FarNodeFractions(target, source, inverses, depth, far_cells);
-  std::vector<double> two_way(poses.size(), -1.0);
-  for (size_t k = 0; k < poses.size(); ++k) {
-    if (there[k] >= 0.0 && back[k] >= 0.0) two_way[k] = 0.5 * (there[k] + back[k]);
-  }
-  return two_way;
+  return TwoWayFarNodeFractions(source, target, poses, SymmetryDepth(source, target), far_cells);
 }
 
 // The answer's and its twins' (S * answer) two-way far fractions, and the twin whose is least.

@@ -22,6 +22,7 @@
 #include "core/refine/dominant_plane.h"
 #include "core/refine/node_closeness.h"
 #include "core/refine/symmetry_starts.h"
+#include "core/refine/weak_direction_start.h"
 #include "core/registrar/confidence_model.h"
 #include "core/registrar/embedded_models.h"
 
@@ -638,6 +639,29 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
     if (std::optional<SymmetricTwin> turned =
             BestSymmetricTwin(source, target, best.T_target_source, turns)) {
       try_start(turned->T_target_source, "round_axis");
+    }
+  }
+  // The weak-direction start (RegistrationOptions::search_weak_direction_start), whatever the
+  // confidence (springs off along their screw read up to 0.94). Kept by a rule of its own, as the
+  // twins' is: along a shallow direction the truth and the answer fit alike by fitness and by the
+  // nodes' mean distance, and only the nodes left without a partner tell them apart.
+  if (net_refine && options.search_weak_direction_start && best.valid && symmetries.empty() &&
+      !revolution.has_value() && !IsDeepPair(source, target, refinement)) {
+    const WeakDirectionOptions weak;
+    const int depth = SymmetryDepth(source, target);
+    if (std::optional<WeakDirectionStart> stepped =
+            BestWeakDirectionStart(source, target, best, depth, weak)) {
+      absl::StatusOr<TreeRefinementResult> r =
+          RefineWithFallback(source, target, stepped->T_target_source, refinement, cache);
+      ++result.starts;
+      if (r.ok() && r->valid && r->fitness >= best.fitness - kTwinFitnessSlack &&
+          TwoWayFarNodeFractions(source, target, {r->T_target_source}, depth, weak.far_cells)
+                  .front() <= stepped->answer_far_fraction - weak.min_far_fraction_drop) {
+        settle(*r, stepped->T_target_source, result);
+        result.start = "weak_direction";
+        best = *std::move(r);
+        best_closeness.reset();
+      }
     }
   }
   // The symmetric start (RegistrationOptions::try_symmetric_starts): object-scale trees whose

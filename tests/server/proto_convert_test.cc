@@ -200,6 +200,17 @@ TEST(ProtoConvertTest, RoundAxisStartIsOnUnlessTurnedOff) {
   EXPECT_FALSE(options->search_round_axis_start);
 }
 
+TEST(ProtoConvertTest, WeakDirectionStartIsOnUnlessTurnedOff) {
+  auto options = OptionsFromProto({});
+  ASSERT_TRUE(options.ok());
+  EXPECT_TRUE(options->search_weak_direction_start);
+  v1::RegisterOptions proto;
+  proto.set_weak_direction_start(false);
+  options = OptionsFromProto(proto);
+  ASSERT_TRUE(options.ok());
+  EXPECT_FALSE(options->search_weak_direction_start);
+}
+
 TEST(ProtoConvertTest, SensorAlignedCheckIsOnUnlessTurnedOff) {
   auto options = OptionsFromProto({});
   ASSERT_TRUE(options.ok());

@@ -1,0 +1,97 @@
+#include "core/refine/weak_direction_start.h"
+
+#include <cmath>
+
+#include "Eigen/Eigenvalues"
+#include "core/refine/cell_index.h"
+#include "core/refine/node_closeness.h"
+
+namespace rpsr::core {
+namespace {
+
+using Vector6d = Eigen::Matrix<double, 6, 1>;
+using Matrix6d = Eigen::Matrix<double, 6, 6>;
+
+struct WeakestDirection {
+  Vector6d direction = Vector6d::Zero();  // unit, rotation rows in metres
+  double normalized_eigenvalue = 1.0;
+  bool found = false;
+};
+
+// As AnalyseDegeneracy (tree_refinement.cc) scales it: rotation rows and columns divided by the
+// lever arms, so every direction is a displacement in metres.
+WeakestDirection FindWeakestDirection(const TreeRefinementResult& answer) {
+  WeakestDirection weakest;
+  Vector6d s = Vector6d::Ones();
+  for (int a = 0; a < 3; ++a) {
+    if (!(answer.rotation_lever_arms[a] > 0.0)) return weakest;
+    s[a] = 1.0 / answer.rotation_lever_arms[a];
+  }
+  const Matrix6d scaled = s.asDiagonal() * answer.information * s.asDiagonal();
+  if (!scaled.allFinite()) return weakest;
+  Eigen::SelfAdjointEigenSolver<Matrix6d> solver(scaled);
+  const double largest = solver.eigenvalues().maxCoeff();
+  if (!(largest > 0.0)) return weakest;
+  weakest.direction = solver.eigenvectors().col(0);
+  weakest.normalized_eigenvalue = solver.eigenvalues()[0] / largest;
+  weakest.found = true;
+  return weakest;
+}
+
+Eigen::Isometry3d Step(const TreeRefinementResult& answer, const Vector6d& direction,
+                       double step_m) {
+  const Eigen::Vector3d w =
+      (step_m * direction.head<3>()).cwiseQuotient(answer.rotation_lever_arms);
+  const Eigen::Vector3d v = step_m * direction.tail<3>();
+  const Eigen::Vector3d& c = answer.information_center;
+  Eigen::Isometry3d move = Eigen::Isometry3d::Identity();
+  const double angle = w.norm();
+  if (angle > 0.0) move.linear() = Eigen::AngleAxisd(angle, w / angle).toRotationMatrix();
+  move.translation() = c - move.linear() * c + v;
+  return move * answer.T_target_source;
+}
+
+}  // namespace
+
+Eigen::Isometry3d StepAlongWeakestDirection(const TreeRefinementResult& answer, double step_m) {
+  const WeakestDirection weakest = FindWeakestDirection(answer);
+  if (!weakest.found) return answer.T_target_source;
+  return Step(answer, weakest.direction, step_m);
+}
+
+std::optional<WeakDirectionStart> BestWeakDirectionStart(const Octree& source, const Octree& target,
+                                                         const TreeRefinementResult& answer,
+                                                         int depth,
+                                                         const WeakDirectionOptions& options) {
+  if (depth < 1 || depth > source.max_depth() || depth > target.max_depth()) return std::nullopt;
+  const WeakestDirection weakest = FindWeakestDirection(answer);
+  if (!weakest.found || weakest.normalized_eigenvalue >= options.max_normalized_eigenvalue) {
+    return std::nullopt;
+  }
+  const double edge = CellEdge(target, depth);
+  std::vector<Eigen::Isometry3d> poses = {answer.T_target_source};
+  std::vector<double> steps = {0.0};
+  for (double cells : options.steps_cells) {
+    for (double sign : {1.0, -1.0}) {
+      steps.push_back(sign * cells);
+      poses.push_back(Step(answer, weakest.direction, sign * cells * edge));
+    }
+  }
+  const std::vector<double> far =
+      TwoWayFarNodeFractions(source, target, poses, depth, options.far_cells);
+  if (far.empty() || far[0] < 0.0) return std::nullopt;
+  int best = -1;
+  for (size_t k = 1; k < far.size(); ++k) {
+    if (far[k] >= 0.0 && (best < 0 || far[k] < far[best])) best = static_cast<int>(k);
+  }
+  if (best < 0 || far[best] > far[0] - options.min_far_fraction_drop) return std::nullopt;
+  WeakDirectionStart start;
+  start.T_target_source = poses[best];
+  start.step_cells = steps[best];
+  start.far_fraction = far[best];
+  start.answer_far_fraction = far[0];
+  start.normalized_eigenvalue = weakest.normalized_eigenvalue;
+  return start;
+}
+
+}  // namespace rpsr::core
