@@ -754,6 +754,36 @@ constexpr std::array<const char*, 6> kAxisNames = {"rotation about x",    "rotat
                                                    "rotation about z",    "translation along x",
                                                    "translation along y", "translation along z"};
 
+}  // namespace
+
+Matrix6d InformationInMetres(const TreeRefinementResult& result) {
+  Vector6d s = Vector6d::Ones();
+  for (int a = 0; a < 3; ++a) s[a] = 1.0 / result.rotation_lever_arms[a];
+  return s.asDiagonal() * result.information * s.asDiagonal();
+}
+
+Vector6d MotionInMetres(const TreeRefinementResult& result, const Eigen::Isometry3d& motion) {
+  const Eigen::Vector3d& c = result.information_center;
+  const Eigen::AngleAxisd turn(motion.linear());
+  const Eigen::Vector3d w = turn.angle() * turn.axis();
+  const Eigen::Vector3d v = motion.translation() - c + motion.linear() * c;
+  Vector6d u;
+  u << w.cwiseProduct(result.rotation_lever_arms), v;
+  return u;
+}
+
+Eigen::Isometry3d MotionFromMetres(const TreeRefinementResult& result, const Vector6d& u) {
+  const Eigen::Vector3d w = u.head<3>().cwiseQuotient(result.rotation_lever_arms);
+  const Eigen::Vector3d& c = result.information_center;
+  Eigen::Isometry3d motion = Eigen::Isometry3d::Identity();
+  const double angle = w.norm();
+  if (angle > 0.0) motion.linear() = Eigen::AngleAxisd(angle, w / angle).toRotationMatrix();
+  motion.translation() = c - motion.linear() * c + u.tail<3>();
+  return motion;
+}
+
+namespace {
+
 void AnalyseDegeneracy(const Linearization& lin, const TreeRefinementOptions& options,
                        TreeRefinementResult& result) {
   // A joint finest stage's estimate minimises both depths' cost: its information is their sum.
@@ -762,14 +792,11 @@ void AnalyseDegeneracy(const Linearization& lin, const TreeRefinementOptions& op
   // A rotation w about axis a moves the matched points by w times their RMS lever arm about a,
   // sqrt(trace(spread) - spread_aa): dividing the rotation rows and columns by it turns every
   // direction into a displacement in metres, so the six eigenvalues are comparable.
-  Vector6d s = Vector6d::Ones();
   for (int a = 0; a < 3; ++a) {
     result.rotation_lever_arms[a] =
         std::sqrt(std::max(lin.spread.trace() - lin.spread(a, a), 1e-24));
-    s[a] = 1.0 / result.rotation_lever_arms[a];
   }
-  const Matrix6d scaled = s.asDiagonal() * result.information * s.asDiagonal();
-  Eigen::SelfAdjointEigenSolver<Matrix6d> solver(scaled);
+  Eigen::SelfAdjointEigenSolver<Matrix6d> solver(InformationInMetres(result));
   const Vector6d values = solver.eigenvalues();
   const double largest = std::max(values.maxCoeff(), 1e-300);
   result.normalized_eigenvalues = values / largest;

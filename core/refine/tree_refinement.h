@@ -499,6 +499,20 @@ class PreparedRefinementTarget {
   size_t bytes_ = 0;
 };
 
+// `result.information` with its rotation rows and columns divided by rotation_lever_arms, so
+// that every direction is a displacement in metres: the matrix whose eigenvalues
+// normalized_eigenvalues are and whose weakest directions degenerate_directions hold.
+Eigen::Matrix<double, 6, 6> InformationInMetres(const TreeRefinementResult& result);
+
+// A motion D (applied on the left of a T_target_source) in the information's perturbation,
+// D = [exp(w) | c - exp(w) c + v] with c = information_center, as (w scaled by
+// rotation_lever_arms, v): metres throughout, the units of InformationInMetres' directions.
+Eigen::Matrix<double, 6, 1> MotionInMetres(const TreeRefinementResult& result,
+                                           const Eigen::Isometry3d& motion);
+// The inverse: the motion D of `u` (rotation rows in metres of lever arm, then translation).
+Eigen::Isometry3d MotionFromMetres(const TreeRefinementResult& result,
+                                   const Eigen::Matrix<double, 6, 1>& u);
+
 // Refines `initial_T_target_source`. Errors (InvalidArgument): a non-finite or non-rigid initial
 // transform, empty trees, depths outside the trees or coarsest > finest, non-positive iteration
 // counts, thresholds or scales. Geometric failures (no overlap, degeneracy) are NOT errors: they

@@ -18,16 +18,13 @@ struct WeakestDirection {
   bool found = false;
 };
 
-// As AnalyseDegeneracy (tree_refinement.cc) scales it: rotation rows and columns divided by the
-// lever arms, so every direction is a displacement in metres.
+// The weakest direction of the information in metres (InformationInMetres), unit.
 WeakestDirection FindWeakestDirection(const TreeRefinementResult& answer) {
   WeakestDirection weakest;
-  Vector6d s = Vector6d::Ones();
   for (int a = 0; a < 3; ++a) {
     if (!(answer.rotation_lever_arms[a] > 0.0)) return weakest;
-    s[a] = 1.0 / answer.rotation_lever_arms[a];
   }
-  const Matrix6d scaled = s.asDiagonal() * answer.information * s.asDiagonal();
+  const Matrix6d scaled = InformationInMetres(answer);
   if (!scaled.allFinite()) return weakest;
   Eigen::SelfAdjointEigenSolver<Matrix6d> solver(scaled);
   const double largest = solver.eigenvalues().maxCoeff();
@@ -40,15 +37,7 @@ WeakestDirection FindWeakestDirection(const TreeRefinementResult& answer) {
 
 Eigen::Isometry3d Step(const TreeRefinementResult& answer, const Vector6d& direction,
                        double step_m) {
-  const Eigen::Vector3d w =
-      (step_m * direction.head<3>()).cwiseQuotient(answer.rotation_lever_arms);
-  const Eigen::Vector3d v = step_m * direction.tail<3>();
-  const Eigen::Vector3d& c = answer.information_center;
-  Eigen::Isometry3d move = Eigen::Isometry3d::Identity();
-  const double angle = w.norm();
-  if (angle > 0.0) move.linear() = Eigen::AngleAxisd(angle, w / angle).toRotationMatrix();
-  move.translation() = c - move.linear() * c + v;
-  return move * answer.T_target_source;
+  return MotionFromMetres(answer, step_m * direction) * answer.T_target_source;
 }
 
 }  // namespace
@@ -65,9 +54,7 @@ std::optional<WeakDirectionStart> BestWeakDirectionStart(const Octree& source, c
                                                          const WeakDirectionOptions& options) {
   if (depth < 1 || depth > source.max_depth() || depth > target.max_depth()) return std::nullopt;
   const WeakestDirection weakest = FindWeakestDirection(answer);
-  if (!weakest.found || weakest.normalized_eigenvalue >= options.max_normalized_eigenvalue) {
-    return std::nullopt;
-  }
+  if (!weakest.found) return std::nullopt;
   const double edge = CellEdge(target, depth);
   std::vector<Eigen::Isometry3d> poses = {answer.T_target_source};
   std::vector<double> steps = {0.0};

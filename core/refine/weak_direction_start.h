@@ -25,9 +25,6 @@
 namespace rpsr::core {
 
 struct WeakDirectionOptions {
-  // Only answers whose weakest normalised eigenvalue (TreeRefinementResult's
-  // normalized_eigenvalues, 1 = the strongest direction) is below this are stepped.
-  double max_normalized_eigenvalue = 1.0;
   // Steps along the weakest direction, in cell edges of the target's `depth` of the RMS motion
   // of the matched points; each is tried with both signs. An unseen spring's answer lay 2-3
   // cells of the depth above the finest off along it.
@@ -60,8 +57,8 @@ struct WeakDirectionStart {
 Eigen::Isometry3d StepAlongWeakestDirection(const TreeRefinementResult& answer, double step_m);
 
 // The step (options.steps_cells, both signs) whose two-way far fraction at `depth` is least, when
-// it is at least min_far_fraction_drop below the answer's; nullopt otherwise, when the weakest
-// direction is not weak enough, or when nothing can be measured at `depth`.
+// it is at least min_far_fraction_drop below the answer's; nullopt otherwise, when the information
+// has no direction to step along, or when nothing can be measured at `depth`.
 std::optional<WeakDirectionStart> BestWeakDirectionStart(const Octree& source, const Octree& target,
                                                          const TreeRefinementResult& answer,
                                                          int depth,

@@ -521,6 +521,22 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
       best_closeness = r_closeness;  // unset when it was not measured
     }
   };
+  // A start kept by a rule of its own (the weak-direction and symmetric starts', whose answers fit
+  // alike with the answer so far by the rule above): refined, and settled when valid, within
+  // kTwinFitnessSlack of the answer's fitness, and `keep(refined)`.
+  auto try_start_kept_by = [&](const Eigen::Isometry3d& start_pose, const char* name,
+                               const auto& keep) {
+    absl::StatusOr<TreeRefinementResult> r =
+        RefineWithFallback(source, target, start_pose, refinement, cache);
+    ++result.starts;
+    if (!r.ok() || !r->valid || !(r->fitness >= best.fitness - kTwinFitnessSlack) || !keep(*r)) {
+      return;
+    }
+    settle(*r, start_pose, result);
+    result.start = name;
+    best = *std::move(r);
+    best_closeness.reset();
+  };
   const bool net_refine = options.mode == RegistrationMode::kNetRefine;
   // The network's deferred passes (RegistrationOptions::later_passes_only_when_unconfident): run
   // from the first pass's estimate only when its answer is not confident, their estimate refined
@@ -651,17 +667,12 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
     const int depth = SymmetryDepth(source, target);
     if (std::optional<WeakDirectionStart> stepped =
             BestWeakDirectionStart(source, target, best, depth, weak)) {
-      absl::StatusOr<TreeRefinementResult> r =
-          RefineWithFallback(source, target, stepped->T_target_source, refinement, cache);
-      ++result.starts;
-      if (r.ok() && r->valid && r->fitness >= best.fitness - kTwinFitnessSlack &&
-          TwoWayFarNodeFractions(source, target, {r->T_target_source}, depth, weak.far_cells)
-                  .front() <= stepped->answer_far_fraction - weak.min_far_fraction_drop) {
-        settle(*r, stepped->T_target_source, result);
-        result.start = "weak_direction";
-        best = *std::move(r);
-        best_closeness.reset();
-      }
+      try_start_kept_by(
+          stepped->T_target_source, "weak_direction", [&](const TreeRefinementResult& r) {
+            return TwoWayFarNodeFractions(source, target, {r.T_target_source}, depth,
+                                          weak.far_cells)
+                       .front() <= stepped->answer_far_fraction - weak.min_far_fraction_drop;
+          });
     }
   }
   // The symmetric start (RegistrationOptions::try_symmetric_starts): object-scale trees whose
@@ -676,19 +687,10 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
         FindBreakingNodes(source, target, best.T_target_source, symmetries, symmetry_options);
     if (std::optional<BreakingNodeTwin> twin = TwinMatchingBreakingNodes(
             source, target, best.T_target_source, symmetries, breaking, symmetry_options)) {
-      absl::StatusOr<TreeRefinementResult> r =
-          RefineWithFallback(source, target, twin->T_target_source, refinement, cache);
-      ++result.starts;
-      if (r.ok() && r->valid && r->fitness >= best.fitness - kTwinFitnessSlack) {
-        const double match =
-            BreakingNodeMatches(source, target, breaking, {r->T_target_source}, symmetry_options)
-                .front();
-        if (match >= twin->answer_match + symmetry_options.min_breaking_match_gain) {
-          settle(*r, twin->T_target_source, result);
-          result.start = "symmetric";
-          best = *std::move(r);
-        }
-      }
+      try_start_kept_by(twin->T_target_source, "symmetric", [&](const TreeRefinementResult& r) {
+        return BreakingNodeMatches(source, target, breaking, {r.T_target_source}, symmetry_options)
+                   .front() >= twin->answer_match + symmetry_options.min_breaking_match_gain;
+      });
     }
   }
   if (revolution.has_value()) {

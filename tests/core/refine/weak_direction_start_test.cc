@@ -12,6 +12,7 @@
 #include "core/data/object_pairs.h"
 #include "core/data/registration_metrics.h"
 #include "core/data/transform_convention.h"
+#include "core/refine/cell_index.h"
 #include "core/refine/node_closeness.h"
 #include "core/refine/symmetry_starts.h"
 #include "core/synth/seeded_random.h"
@@ -93,7 +94,7 @@ TEST(WeakDirectionStartTest, TheStepMovesAlongTheLeastConstrainedDirectionByItsL
 TEST(WeakDirectionStartTest, ASpringSteppedOffAlongItsScrewIsSteppedBack) {
   const Spring spring = MakeSpring();
   const int depth = SymmetryDepth(spring.source, spring.target);
-  const double edge = 2.0 * spring.target.half_length() / static_cast<double>(1 << depth);
+  const double edge = CellEdge(spring.target, depth);
   int stepped_back = 0;
   for (double cells : {-3.0, -2.0, 2.0, 3.0}) {
     TreeRefinementResult answer = spring.at_truth;
