@@ -158,6 +158,10 @@ struct RegisterOptions {
   // Refine the answer stepped along its weakest direction too, when that leaves clearly fewer
   // nodes without a partner (proto RegisterOptions.weak_direction_start).
   bool weak_direction_start = true;
+  // With weak_direction_start, the same step once more at the finest depth for clean, whole
+  // answers where the first kept nothing: a little more accurate on clean object scans, about a
+  // quarter slower on objects (proto RegisterOptions.weak_direction_finest_round).
+  bool weak_direction_finest_round = false;
   // Check a scene-scale answer that puts the two sensors together against a search over the
   // structure off the ground (proto RegisterOptions.sensor_aligned_check); in mode refine a
   // losing answer is kept but doubted (confidence capped, failure_reason naming the other pose).

@@ -105,6 +105,9 @@ absl::StatusOr<core::RegistrationOptions> OptionsFromProto(const v1::RegisterOpt
   if (proto.has_weak_direction_start()) {
     options.search_weak_direction_start = proto.weak_direction_start();
   }
+  if (proto.has_weak_direction_finest_round()) {
+    options.weak_direction_finest_round = proto.weak_direction_finest_round();
+  }
   if (proto.has_sensor_aligned_check()) {
     options.check_sensor_aligned_answers = proto.sensor_aligned_check();
   }

@@ -67,6 +67,10 @@ ABSL_FLAG(bool, weak_direction_start, true,
           "near-symmetries: also refine the answer stepped along its weakest direction (a "
           "spring's screw, a slide along a face) when that leaves clearly fewer nodes without a "
           "partner, and keep it when it still does");
+ABSL_FLAG(bool, weak_direction_finest_round, false,
+          "with --weak_direction_start, when its step kept nothing and the answer is clean and "
+          "whole: the same step once more at the finest depth (a little more accurate on clean "
+          "object scans, about a quarter slower on objects)");
 ABSL_FLAG(bool, sensor_aligned_check, true,
           "eval, register, odometry, bench, net+refine on scene-scale trees: when the answer puts "
           "the two sensors within a search cell of each other and both clouds have a ground, "
@@ -127,6 +131,7 @@ void ApplyRegistrationFlags(core::RegistrationOptions& options) {
   options.try_symmetric_starts = absl::GetFlag(FLAGS_symmetric_starts);
   options.search_round_axis_start = absl::GetFlag(FLAGS_round_axis_start);
   options.search_weak_direction_start = absl::GetFlag(FLAGS_weak_direction_start);
+  options.weak_direction_finest_round = absl::GetFlag(FLAGS_weak_direction_finest_round);
   options.check_sensor_aligned_answers = absl::GetFlag(FLAGS_sensor_aligned_check);
   options.refinement.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
   options.refinement.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);

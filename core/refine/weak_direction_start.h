@@ -32,13 +32,24 @@ struct WeakDirectionOptions {
   // Nodes of `depth` farther than this (cells, below NodeClosenessOptions::kCapCells) from every
   // node of the other cloud are without a partner. One depth above the finest (the registrar's
   // SymmetryDepth), 1.5 cells read a higher mean recall on all three study seeds than 1.9 (the
-  // twins' far_cells); a further round at the finest depth fixed more clean answers but lost
-  // 23 disturbed ones, whose finest nodes go without a partner by sampling alone
+  // twins' far_cells); 1.25 was mixed (seed 2 lower, seed 3's clean rotation RMSE 1.04 -> 1.65)
   // (refinement-notes.md, *Steps along the weakest direction*).
   double far_cells = 1.5;
   // The best step must leave at least this fraction fewer nodes without a partner (the twins'
   // min_far_fraction_drop).
   double min_far_fraction_drop = 0.008;
+  // The registrar's second round, at the finest depth, when the round at SymmetryDepth kept
+  // nothing (RegistrationOptions::weak_direction_finest_round, off by default: objects take about
+  // a quarter longer): only for answers whose source nodes scatter about the target's surface by a
+  // median of at most finest_max_scatter_cells finest cells
+  // (TreeRefinementResult::surface_scatter_cells) and whose fitness is at least finest_min_fitness.
+  // At the finest depth a node of an object's 1,024-2,048 points is a point or two, so under noise,
+  // jitter, outliers or a crop a node lacks a partner by sampling alone, and an ungated round lost
+  // as many answers as it won on the unseen study's seed 1 (9 / 13). Chosen on seed 1 (0.28-0.30
+  // and 0.97-0.98 read the same), checked on seeds 2 and 3 (refinement-notes.md, *A finest round
+  // for clean, whole answers*).
+  double finest_max_scatter_cells = 0.3;
+  double finest_min_fitness = 0.98;
 };
 
 struct WeakDirectionStart {

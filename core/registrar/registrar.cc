@@ -523,19 +523,20 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   };
   // A start kept by a rule of its own (the weak-direction and symmetric starts', whose answers fit
   // alike with the answer so far by the rule above): refined, and settled when valid, within
-  // kTwinFitnessSlack of the answer's fitness, and `keep(refined)`.
+  // kTwinFitnessSlack of the answer's fitness, and `keep(refined)`. Whether it was settled.
   auto try_start_kept_by = [&](const Eigen::Isometry3d& start_pose, const char* name,
                                const auto& keep) {
     absl::StatusOr<TreeRefinementResult> r =
         RefineWithFallback(source, target, start_pose, refinement, cache);
     ++result.starts;
     if (!r.ok() || !r->valid || !(r->fitness >= best.fitness - kTwinFitnessSlack) || !keep(*r)) {
-      return;
+      return false;
     }
     settle(*r, start_pose, result);
     result.start = name;
     best = *std::move(r);
     best_closeness.reset();
+    return true;
   };
   const bool net_refine = options.mode == RegistrationMode::kNetRefine;
   // The network's deferred passes (RegistrationOptions::later_passes_only_when_unconfident): run
@@ -660,19 +661,32 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   // The weak-direction start (RegistrationOptions::search_weak_direction_start), whatever the
   // confidence (springs off along their screw read up to 0.94). Kept by a rule of its own, as the
   // twins' is: along a shallow direction the truth and the answer fit alike by fitness and by the
-  // nodes' mean distance, and only the nodes left without a partner tell them apart.
+  // nodes' mean distance, and only the nodes left without a partner tell them apart. First at
+  // SymmetryDepth; when that keeps nothing, the caller asked for it (weak_direction_finest_round)
+  // and the answer is clean and whole (its nodes scatter little about the target's surface,
+  // nearly all of it overlaps), once more at the finest depth, where a few degrees of turn along a
+  // screw move the coil's ends by a cell (WeakDirectionOptions' finest_* fields say why the gate).
   if (net_refine && options.search_weak_direction_start && best.valid && symmetries.empty() &&
       !revolution.has_value() && !IsDeepPair(source, target, refinement)) {
     const WeakDirectionOptions weak;
-    const int depth = SymmetryDepth(source, target);
-    if (std::optional<WeakDirectionStart> stepped =
-            BestWeakDirectionStart(source, target, best, depth, weak)) {
-      try_start_kept_by(
+    // Whether the step at `depth` was refined and kept.
+    auto try_weak_direction = [&](int depth) {
+      std::optional<WeakDirectionStart> stepped =
+          BestWeakDirectionStart(source, target, best, depth, weak);
+      if (!stepped.has_value()) return false;
+      return try_start_kept_by(
           stepped->T_target_source, "weak_direction", [&](const TreeRefinementResult& r) {
             return TwoWayFarNodeFractions(source, target, {r.T_target_source}, depth,
                                           weak.far_cells)
                        .front() <= stepped->answer_far_fraction - weak.min_far_fraction_drop;
           });
+    };
+    const int depth = SymmetryDepth(source, target);
+    if (!try_weak_direction(depth) && options.weak_direction_finest_round && depth < finest_depth &&
+        best.surface_scatter_cells >= 0.0 &&
+        best.surface_scatter_cells <= weak.finest_max_scatter_cells &&
+        best.fitness >= weak.finest_min_fitness) {
+      try_weak_direction(finest_depth);
     }
   }
   // The symmetric start (RegistrationOptions::try_symmetric_starts): object-scale trees whose

@@ -228,20 +228,24 @@ BENCHMARK(BM_RegisterLaterPasses)
     ->ArgsProduct({{static_cast<int>(RegistrationMode::kNetRefine)}, {0, 2, 1}, {0, 1}})
     ->Unit(benchmark::kMillisecond);
 
-// net+refine with the weak-direction start (weak:1, the default:
-// RegistrationOptions::search_weak_direction_start) and without (weak:0), on the objects (pairs:0)
-// and their jittered copies (pairs:2): its cost is the scoring of ten steps along the answer's
-// weakest direction on every object pair without near-symmetries, and a refinement where one
-// leaves clearly fewer nodes without a partner.
+// net+refine with the weak-direction start's two rounds (weak:2:
+// RegistrationOptions::search_weak_direction_start and weak_direction_finest_round), its first
+// round alone (weak:1, the default) and without it (weak:0), on the objects (pairs:0) and their
+// jittered copies (pairs:2): its cost is the scoring of ten steps along the answer's weakest
+// direction on every object pair without near-symmetries (at the finest depth too for clean, whole
+// answers where the first round kept nothing), and a refinement where one leaves clearly fewer
+// nodes without a partner.
 void BM_RegisterWeakDirectionStart(benchmark::State& state) {
-  const bool weak = state.range(2) != 0;
+  const int64_t weak = state.range(2);
   const TreePairs& trees = state.range(1) == 2 ? JitteredObjectTrees() : ObjectTrees();
-  RunRegister(state, trees, false, SharedRegistrar(), {},
-              [weak](RegistrationOptions& options) { options.search_weak_direction_start = weak; });
+  RunRegister(state, trees, false, SharedRegistrar(), {}, [weak](RegistrationOptions& options) {
+    options.search_weak_direction_start = weak >= 1;
+    options.weak_direction_finest_round = weak >= 2;
+  });
 }
 BENCHMARK(BM_RegisterWeakDirectionStart)
     ->ArgNames({"mode", "pairs", "weak"})
-    ->ArgsProduct({{static_cast<int>(RegistrationMode::kNetRefine)}, {0, 2}, {0, 1}})
+    ->ArgsProduct({{static_cast<int>(RegistrationMode::kNetRefine)}, {0, 2}, {0, 1, 2}})
     ->Unit(benchmark::kMillisecond);
 
 // Objects jittered by 0.08, with the noise polish (polish:1) and without (polish:0).

@@ -211,6 +211,17 @@ TEST(ProtoConvertTest, WeakDirectionStartIsOnUnlessTurnedOff) {
   EXPECT_FALSE(options->search_weak_direction_start);
 }
 
+TEST(ProtoConvertTest, WeakDirectionFinestRoundIsOffUnlessTurnedOn) {
+  auto options = OptionsFromProto({});
+  ASSERT_TRUE(options.ok());
+  EXPECT_FALSE(options->weak_direction_finest_round);
+  v1::RegisterOptions proto;
+  proto.set_weak_direction_finest_round(true);
+  options = OptionsFromProto(proto);
+  ASSERT_TRUE(options.ok());
+  EXPECT_TRUE(options->weak_direction_finest_round);
+}
+
 TEST(ProtoConvertTest, SensorAlignedCheckIsOnUnlessTurnedOff) {
   auto options = OptionsFromProto({});
   ASSERT_TRUE(options.ok());
