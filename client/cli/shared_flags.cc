@@ -70,7 +70,8 @@ ABSL_FLAG(bool, weak_direction_start, true,
 ABSL_FLAG(bool, weak_direction_finest_round, false,
           "with --weak_direction_start, when its step kept nothing and the answer is clean and "
           "whole: the same step once more at the finest depth (a little more accurate on clean "
-          "object scans, about a quarter slower on objects)");
+          "object scans, about a quarter slower on objects; needs --noise_polish, which measures "
+          "the scatter)");
 ABSL_FLAG(bool, sensor_aligned_check, true,
           "eval, register, odometry, bench, net+refine on scene-scale trees: when the answer puts "
           "the two sensors within a search cell of each other and both clouds have a ground, "

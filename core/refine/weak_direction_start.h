@@ -45,9 +45,10 @@ struct WeakDirectionOptions {
   // (TreeRefinementResult::surface_scatter_cells) and whose fitness is at least finest_min_fitness.
   // At the finest depth a node of an object's 1,024-2,048 points is a point or two, so under noise,
   // jitter, outliers or a crop a node lacks a partner by sampling alone, and an ungated round lost
-  // as many answers as it won on the unseen study's seed 1 (9 / 13). Chosen on seed 1 (0.28-0.30
-  // and 0.97-0.98 read the same), checked on seeds 2 and 3 (refinement-notes.md, *A finest round
-  // for clean, whole answers*).
+  // more answers than it won on the unseen study's seed 1 (9 won, 13 lost). Chosen on seed 1
+  // (0.28-0.30 and 0.97-0.98 read the same), checked on seeds 2 and 3 (refinement-notes.md, *A
+  // finest round for clean, whole answers*). The scatter is measured by the refinement's noise
+  // polish (TreeRefinementOptions::noise_polish): without it the round never runs.
   double finest_max_scatter_cells = 0.3;
   double finest_min_fitness = 0.98;
 };

@@ -138,7 +138,8 @@ struct RegistrationOptions {
   // 1 / 2 / 3, mean recall 0.8543 / 0.8610 / 0.8586 -> 0.8552 / 0.8633 / 0.8605 (15 answers won,
   // 4 lost) and seed 1's clean rotation RMSE 0.84 -> 0.73 degrees, for objects of 2,048 points
   // 14.6 -> 18.1 ms a pair (registrar_bench, BM_RegisterWeakDirectionStart weak:1 -> weak:2):
-  // refinement-notes.md, *A finest round for clean, whole answers*. Proto
+  // refinement-notes.md, *A finest round for clean, whole answers*. The scatter is the noise
+  // polish's measure: with refinement.noise_polish off the round never runs. Proto
   // RegisterOptions.weak_direction_finest_round, CLI --weak_direction_finest_round.
   bool weak_direction_finest_round = false;
   // net+refine on scene-scale trees whose answer (valid, or invalid only for degenerate
@@ -239,10 +240,10 @@ struct RegistrationResult {
   // check's: check_sensor_aligned_answers), "round_axis" (its third on object-scale trees without
   // near-symmetries, search_round_axis_start), "weak_direction" (a further one there,
   // search_weak_direction_start) or "symmetric" (its third on those with, try_symmetric_starts);
-  // and how many starts were refined for this pair (1-6 on scene-scale trees, 1-6 on
-  // object-scale ones; in mode refine 1, or 2 when the sensor-aligned check refined
-  // another start to doubt the answer; 0 when the pipeline stopped before refining: the network's
-  // output not finite).
+  // and how many starts were refined for this pair (1-6 on scene-scale trees, 1-5 on
+  // object-scale ones, 6 with weak_direction_finest_round; in mode refine 1, or 2 when the
+  // sensor-aligned check refined another start to doubt the answer; 0 when the pipeline stopped
+  // before refining: the network's output not finite).
   std::string start = "network";
   int starts = 0;
   RegistrationTimings timings;
