@@ -407,29 +407,52 @@ TEST(RegistrarSecondStartTest, RoundAxisStartTurnsAMugBackOntoItsHandle) {
   EXPECT_GE(settled, 1);
 }
 
+// The clean unseen pair `i` of pair seed 1 (the study's), on trees of depth 6, registered with
+// `without` and with `with`, and both answers' errors.
+struct AnswersWithAndWithout {
+  RegistrationResult without;
+  RegistrationResult with;
+  PairError error_without;
+  PairError error_with;
+};
+absl::StatusOr<AnswersWithAndWithout> RegisterStudyPair(uint64_t i,
+                                                        const RegistrationOptions& without,
+                                                        const RegistrationOptions& with) {
+  PairOptions options;
+  options.split = ObjectSplit::kM2Unseen;
+  absl::StatusOr<ObjectPair> pair = MakeObjectPair(options, DeriveSeed(1, i));
+  if (!pair.ok()) return pair.status();
+  const Octree source = TreeOf(pair->source, 6);
+  const Octree target = TreeOf(pair->target, 6);
+  absl::StatusOr<RegistrationResult> a = SharedRegistrar().Register(source, target, without);
+  if (!a.ok()) return a.status();
+  absl::StatusOr<RegistrationResult> b = SharedRegistrar().Register(source, target, with);
+  if (!b.ok()) return b.status();
+  AnswersWithAndWithout answers{*std::move(a), *std::move(b), {}, {}};
+  answers.error_without = ErrorOf(answers.without.T_target_source, pair->T_target_source);
+  answers.error_with = ErrorOf(answers.with.T_target_source, pair->T_target_source);
+  return answers;
+}
+
 // net+refine's weak-direction start (RegistrationOptions::search_weak_direction_start) on the
 // clean unseen pairs of pair seed 1 (the study's): the helix spring of pair 48, 7 degrees off
 // along its screw without it, ends within 1.5 degrees from the start "weak_direction"; no answer
 // within (1 deg, 0.01) without it is lost with it; where the start is not kept, the answer and
 // its confidence are the very ones without it.
 TEST(RegistrarSecondStartTest, WeakDirectionStartTurnsASpringBackAlongItsScrew) {
-  PairOptions options;
-  options.split = ObjectSplit::kM2Unseen;
   RegistrationOptions without;
   without.search_weak_direction_start = false;
   int kept = 0;
   std::vector<uint64_t> pairs = {48};
   for (uint64_t i = 0; i < 32; ++i) pairs.push_back(i);
   for (uint64_t i : pairs) {
-    absl::StatusOr<ObjectPair> pair = MakeObjectPair(options, DeriveSeed(1, i));
-    ASSERT_TRUE(pair.ok()) << pair.status();
-    const Octree source = TreeOf(pair->source, 6);
-    const Octree target = TreeOf(pair->target, 6);
-    auto a = SharedRegistrar().Register(source, target, without);
-    auto b = SharedRegistrar().Register(source, target, RegistrationOptions{});
-    ASSERT_TRUE(a.ok() && b.ok());
-    const PairError error_without = ErrorOf(a->T_target_source, pair->T_target_source);
-    const PairError error_with = ErrorOf(b->T_target_source, pair->T_target_source);
+    absl::StatusOr<AnswersWithAndWithout> answers =
+        RegisterStudyPair(i, without, RegistrationOptions{});
+    ASSERT_TRUE(answers.ok()) << answers.status();
+    const RegistrationResult* a = &answers->without;
+    const RegistrationResult* b = &answers->with;
+    const PairError& error_without = answers->error_without;
+    const PairError& error_with = answers->error_with;
     if (i == 48) {
       EXPECT_GT(error_without.rotation_deg, 5.0);
       EXPECT_LT(error_with.rotation_deg, 1.5);
@@ -461,23 +484,19 @@ TEST(RegistrarSecondStartTest, WeakDirectionStartTurnsASpringBackAlongItsScrew) 
 // and whole: WeakDirectionOptions::finest_max_scatter_cells, finest_min_fitness) and none for one
 // outside.
 TEST(RegistrarSecondStartTest, WeakDirectionFinestRoundTurnsABlobBack) {
-  PairOptions options;
-  options.split = ObjectSplit::kM2Unseen;
   RegistrationOptions finest;
   finest.weak_direction_finest_round = true;
   const WeakDirectionOptions weak;
   int kept = 0;
   int gated = 0;
   for (uint64_t i = 0; i < 32; ++i) {
-    absl::StatusOr<ObjectPair> pair = MakeObjectPair(options, DeriveSeed(1, i));
-    ASSERT_TRUE(pair.ok()) << pair.status();
-    const Octree source = TreeOf(pair->source, 6);
-    const Octree target = TreeOf(pair->target, 6);
-    auto a = SharedRegistrar().Register(source, target, RegistrationOptions{});
-    auto b = SharedRegistrar().Register(source, target, finest);
-    ASSERT_TRUE(a.ok() && b.ok());
-    const PairError error_without = ErrorOf(a->T_target_source, pair->T_target_source);
-    const PairError error_with = ErrorOf(b->T_target_source, pair->T_target_source);
+    absl::StatusOr<AnswersWithAndWithout> answers =
+        RegisterStudyPair(i, RegistrationOptions{}, finest);
+    ASSERT_TRUE(answers.ok()) << answers.status();
+    const RegistrationResult* a = &answers->without;
+    const RegistrationResult* b = &answers->with;
+    const PairError& error_without = answers->error_without;
+    const PairError& error_with = answers->error_with;
     if (i == 1) {
       EXPECT_GT(error_without.rotation_deg, 3.0);
       EXPECT_LT(error_with.rotation_deg, 1.0);
