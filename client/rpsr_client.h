@@ -162,6 +162,9 @@ struct RegisterOptions {
   // answers where the first kept nothing: a little more accurate on clean object scans, about a
   // quarter slower on objects (proto RegisterOptions.weak_direction_finest_round).
   bool weak_direction_finest_round = false;
+  // Refine the answer's rotation with the clouds' centres of mass put together too, when the
+  // answer is not confident and leaves them apart (proto RegisterOptions.centroid_start).
+  bool centroid_start = true;
   // Check a scene-scale answer that puts the two sensors together against a search over the
   // structure off the ground (proto RegisterOptions.sensor_aligned_check); in mode refine a
   // losing answer is kept but doubted (confidence capped, failure_reason naming the other pose).
@@ -231,8 +234,9 @@ struct RegistrationResult {
   double net_score_peak = 0.0;
   std::string mode;
   // Where the returned pose's refinement started ("network", "network_later_passes", "initial",
-  // "searched", "searched_turns", "structure", "round_axis", "weak_direction", "symmetric") and
-  // how many starts the server refined for this pair (proto RegistrationResult.start, .starts).
+  // "searched", "searched_turns", "structure", "round_axis", "weak_direction", "centroid",
+  // "symmetric") and how many starts the server refined for this pair (proto
+  // RegistrationResult.start, .starts).
   std::string start;
   int starts = 0;
   ServerTimings timings;

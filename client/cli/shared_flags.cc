@@ -67,6 +67,11 @@ ABSL_FLAG(bool, weak_direction_start, true,
           "near-symmetries: also refine the answer stepped along its weakest direction (a "
           "spring's screw, a slide along a face) when that leaves clearly fewer nodes without a "
           "partner, and keep it when it still does");
+ABSL_FLAG(bool, centroid_start, true,
+          "eval, register, odometry, bench, net+refine on object-scale trees: when the answer is "
+          "below 0.9 confidence and leaves the clouds' centres of mass more than half a cell "
+          "apart, also refine its rotation with the centres put together, and keep the clearly "
+          "better answer");
 ABSL_FLAG(bool, weak_direction_finest_round, false,
           "with --weak_direction_start, when its step kept nothing and the answer is clean and "
           "whole: the same step once more at the finest depth (a little more accurate on clean "
@@ -133,6 +138,7 @@ void ApplyRegistrationFlags(core::RegistrationOptions& options) {
   options.search_round_axis_start = absl::GetFlag(FLAGS_round_axis_start);
   options.search_weak_direction_start = absl::GetFlag(FLAGS_weak_direction_start);
   options.weak_direction_finest_round = absl::GetFlag(FLAGS_weak_direction_finest_round);
+  options.search_centroid_start = absl::GetFlag(FLAGS_centroid_start);
   options.check_sensor_aligned_answers = absl::GetFlag(FLAGS_sensor_aligned_check);
   options.refinement.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
   options.refinement.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);

@@ -173,6 +173,12 @@ constexpr double kTurnedScoreRatio = 1.5;
 // 1% of the extent) is kept without trying the initial guess as a second start.
 constexpr double kConfidentEnough = 0.9;
 
+// The centroid-aligned start (RegistrationOptions::search_centroid_start) runs when the answer
+// leaves the two clouds' centres of mass farther apart than this many cells of SymmetryDepth:
+// half a cell, chosen before measuring (a right answer on a whole object leaves them a sampling's
+// worth apart); not tuned.
+constexpr double kCentroidStartMinCells = 0.5;
+
 // Two starts closer than this converge to the same result: 0.25 degrees, and the source's centre
 // of mass placed within 0.25% of the target cube's half-length (where it is placed, not the
 // translations: those differ with the clouds' distance from their frame's origin).
@@ -656,6 +662,20 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
     if (std::optional<SymmetricTwin> turned =
             BestSymmetricTwin(source, target, best.T_target_source, turns)) {
       try_start(turned->T_target_source, "round_axis");
+    }
+  }
+  // The centroid-aligned start (RegistrationOptions::search_centroid_start): object-scale trees
+  // whose answer is not confident and leaves the centres of mass apart. Taken by the usual rule:
+  // under a crop the truth leaves them apart too, and the refined start then fits no better.
+  if (net_refine && options.search_centroid_start && best.valid &&
+      result.confidence < kConfidentEnough && !IsDeepPair(source, target, refinement)) {
+    const Eigen::Vector3d source_centre = source.level(0).center_of_mass[0].cast<double>();
+    const Eigen::Vector3d target_centre = target.level(0).center_of_mass[0].cast<double>();
+    const Eigen::Vector3d apart = target_centre - best.T_target_source * source_centre;
+    if (apart.norm() > kCentroidStartMinCells * CellEdge(target, SymmetryDepth(source, target))) {
+      Eigen::Isometry3d together = best.T_target_source;
+      together.translation() += apart;
+      try_start(together, "centroid");
     }
   }
   // The weak-direction start (RegistrationOptions::search_weak_direction_start), whatever the

@@ -170,6 +170,7 @@ TEST_F(RpsrClientTest, UploadsInChunksAndRegistersByIds) {
   first_start_only.search_scene_start = false;
   first_start_only.round_axis_start = false;
   first_start_only.weak_direction_start = false;
+  first_start_only.centroid_start = false;
   first_start_only.sensor_aligned_check = false;
   absl::StatusOr<RegistrationResult> alone =
       (*session)->Register(source->cloud_id, target->cloud_id, first_start_only);

@@ -211,6 +211,17 @@ TEST(ProtoConvertTest, WeakDirectionStartIsOnUnlessTurnedOff) {
   EXPECT_FALSE(options->search_weak_direction_start);
 }
 
+TEST(ProtoConvertTest, CentroidStartIsOnUnlessTurnedOff) {
+  auto options = OptionsFromProto({});
+  ASSERT_TRUE(options.ok());
+  EXPECT_TRUE(options->search_centroid_start);
+  v1::RegisterOptions proto;
+  proto.set_centroid_start(false);
+  options = OptionsFromProto(proto);
+  ASSERT_TRUE(options.ok());
+  EXPECT_FALSE(options->search_centroid_start);
+}
+
 TEST(ProtoConvertTest, WeakDirectionFinestRoundIsOffUnlessTurnedOn) {
   auto options = OptionsFromProto({});
   ASSERT_TRUE(options.ok());
