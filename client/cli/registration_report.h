@@ -28,7 +28,8 @@ struct PairReport {
   int iterations = 0;
   std::string mode;
   std::string start;  // where it started: network, network_later_passes, initial, searched,
-                      // searched_turns, structure, round_axis, weak_direction, symmetric
+                      // searched_turns, structure, round_axis, weak_direction, centroid,
+                      // symmetric
   int starts = 0;     // refinement starts tried for this pair
   // Degenerate, and kept at the initial guess along the unconstrained directions.
   bool held_at_initial = false;

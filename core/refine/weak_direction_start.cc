@@ -14,7 +14,6 @@ using Matrix6d = Eigen::Matrix<double, 6, 6>;
 
 struct WeakestDirection {
   Vector6d direction = Vector6d::Zero();  // unit, rotation rows in metres
-  double normalized_eigenvalue = 1.0;
   bool found = false;
 };
 
@@ -30,7 +29,6 @@ WeakestDirection FindWeakestDirection(const TreeRefinementResult& answer) {
   const double largest = solver.eigenvalues().maxCoeff();
   if (!(largest > 0.0)) return weakest;
   weakest.direction = solver.eigenvectors().col(0);
-  weakest.normalized_eigenvalue = solver.eigenvalues()[0] / largest;
   weakest.found = true;
   return weakest;
 }
@@ -77,7 +75,6 @@ std::optional<WeakDirectionStart> BestWeakDirectionStart(const Octree& source, c
   start.step_cells = steps[best];
   start.far_fraction = far[best];
   start.answer_far_fraction = far[0];
-  start.normalized_eigenvalue = weakest.normalized_eigenvalue;
   return start;
 }
 

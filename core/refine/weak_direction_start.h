@@ -51,14 +51,20 @@ struct WeakDirectionOptions {
   // polish (TreeRefinementOptions::noise_polish): without it the round never runs.
   double finest_max_scatter_cells = 0.3;
   double finest_min_fitness = 0.98;
+
+  // Whether an answer with this surface scatter (finest cells; negative: not measured) and
+  // fitness is inside the finest round's gate.
+  bool FinestRoundAdmits(double surface_scatter_cells, double fitness) const {
+    return surface_scatter_cells >= 0.0 && surface_scatter_cells <= finest_max_scatter_cells &&
+           fitness >= finest_min_fitness;
+  }
 };
 
 struct WeakDirectionStart {
   Eigen::Isometry3d T_target_source = Eigen::Isometry3d::Identity();
-  double step_cells = 0.0;             // signed
-  double far_fraction = 0.0;           // of the step
-  double answer_far_fraction = 0.0;    // of the answer
-  double normalized_eigenvalue = 0.0;  // of the direction stepped along
+  double step_cells = 0.0;           // signed
+  double far_fraction = 0.0;         // of the step
+  double answer_far_fraction = 0.0;  // of the answer
 };
 
 // `answer.T_target_source` moved along the weakest direction of `answer.information` by

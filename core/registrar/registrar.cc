@@ -703,9 +703,7 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
     };
     const int depth = SymmetryDepth(source, target);
     if (!try_weak_direction(depth) && options.weak_direction_finest_round && depth < finest_depth &&
-        best.surface_scatter_cells >= 0.0 &&
-        best.surface_scatter_cells <= weak.finest_max_scatter_cells &&
-        best.fitness >= weak.finest_min_fitness) {
+        weak.FinestRoundAdmits(best.surface_scatter_cells, best.fitness)) {
       try_weak_direction(finest_depth);
     }
   }

@@ -507,9 +507,7 @@ TEST(RegistrarSecondStartTest, WeakDirectionFinestRoundTurnsABlobBack) {
       EXPECT_LE(error_with.translation, 0.01) << "pair " << i;
     }
     // The gate reads the answer the first round left, which is a's where b's round kept nothing.
-    const bool inside = a->surface_scatter_cells >= 0.0 &&
-                        a->surface_scatter_cells <= weak.finest_max_scatter_cells &&
-                        a->fitness >= weak.finest_min_fitness;
+    const bool inside = weak.FinestRoundAdmits(a->surface_scatter_cells, a->fitness);
     gated += inside;
     if (b->starts > a->starts) {
       EXPECT_TRUE(inside) << "pair " << i;
