@@ -10,7 +10,8 @@
 // 0.07; BM_LineShapedFraction/depth:D is the line rule's choice on one of those trees;
 // BM_MeanNodeDistance/lidar:L the registrar's closeness of two starts' answers;
 // BM_FarNodeFractions/lidar:L the confidence's turn contrast (the answer and six 45-degree turns,
-// 512 nodes one depth above the finest). Accuracy
+// 512 nodes one depth above the finest); BM_BestWeakDirectionStart the registrar's
+// weak-direction start on 16 unseen object answers. Accuracy
 // (one pass each, counters): BM_ObjectAccuracy/from_truth_deg:A starts 40
 // asymmetric object pairs at the truth rotated by A degrees about a random axis and shifted by
 // 0.07; BM_ObjectBasin/max_angle_deg:A starts them at the identity with the paper's protocol
@@ -30,6 +31,7 @@
 #include "core/refine/node_closeness.h"
 #include "core/refine/symmetry_starts.h"
 #include "core/refine/tree_refinement.h"
+#include "core/refine/weak_direction_start.h"
 #include "core/synth/lidar_sequence.h"
 #include "core/synth/lidar_simulator.h"
 #include "core/synth/shape_families.h"
@@ -219,6 +221,43 @@ void BM_FarNodeFractions(benchmark::State& state) {
   state.counters["far_turned"] = far.back();
 }
 BENCHMARK(BM_FarNodeFractions)->ArgName("lidar")->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+
+// The weak-direction start's scoring (BestWeakDirectionStart at SymmetryDepth, run on every
+// object-scale answer without near-symmetries): 16 unseen object pairs of 2,048 points, each
+// refined from its truth turned by 3 degrees, one call each per iteration. Counter: how many of
+// the 16 found a step to refine.
+void BM_BestWeakDirectionStart(benchmark::State& state) {
+  struct Answer {
+    Octree source;
+    Octree target;
+    TreeRefinementResult refined;
+  };
+  std::vector<Answer> answers;
+  PairOptions options;
+  options.split = ObjectSplit::kM2Unseen;
+  options.num_points = 2048;
+  for (uint64_t seed = 1; answers.size() < 16; ++seed) {
+    auto pair = MakeObjectPair(options, seed);
+    if (!pair.ok()) std::abort();
+    Answer a{TreeOf(pair->source, 6), TreeOf(pair->target, 6), {}};
+    const Eigen::AngleAxisd turn(3.0 * kDeg, Eigen::Vector3d::UnitZ());
+    auto refined = RefineOnTrees(a.source, a.target, turn * pair->T_target_source);
+    if (!refined.ok() || !refined->valid) continue;
+    a.refined = *std::move(refined);
+    answers.push_back(std::move(a));
+  }
+  int found = 0;
+  for (auto _ : state) {
+    found = 0;
+    for (const Answer& a : answers) {
+      found += BestWeakDirectionStart(a.source, a.target, a.refined,
+                                      SymmetryDepth(a.source, a.target))
+                   .has_value();
+    }
+  }
+  state.counters["found"] = found;
+}
+BENCHMARK(BM_BestWeakDirectionStart)->Unit(benchmark::kMillisecond);
 
 ObjectPair AsymmetricPair(const PairOptions& options, uint64_t& seed) {
   while (true) {
