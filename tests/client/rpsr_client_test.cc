@@ -28,6 +28,7 @@
 #include "core/io/point_cloud_io.h"
 #include "core/registrar/confidence_calibration.h"
 #include "core/synth/lidar_sequence.h"
+#include "core/synth/seeded_random.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "server/rpsr_server.h"
@@ -378,6 +379,43 @@ TEST_F(RpsrClientTest, LineRuleIsChosenUnlessGivenAndReported) {
 // RegisterOptions::noise_polish reaches the server, and the result says how far the source's
 // points scatter about the target's surface and whether the polish ran: it does for a heavily
 // jittered object pair, not for the shipped clean one, and never when turned off.
+// The client's start options reach the server's registrar (RegisterOptions ->
+// proto -> RegistrationOptions), shown by what each changes on an unseen study pair that needs it
+// (the registrar's own tests, second_start_test.cc, pin the same pairs): the weak-direction start's
+// finest round (off by default) turns seed 1's blob of pair 1 back from 4 degrees; the
+// centroid-aligned start (on by default) brings seed 3's gear of pair 95 back from 9 degrees.
+TEST_F(RpsrClientTest, StartOptionsReachTheRegistrar) {
+  core::PairOptions unseen;
+  unseen.split = core::ObjectSplit::kM2Unseen;
+  std::unique_ptr<Client> client = Connect();
+  absl::StatusOr<std::unique_ptr<Session>> session = client->CreateSession();
+  ASSERT_TRUE(session.ok()) << session.status();
+  auto register_pair = [&](uint64_t seed, uint64_t i, const RegisterOptions& options) {
+    absl::StatusOr<core::ObjectPair> pair = core::MakeObjectPair(unseen, core::DeriveSeed(seed, i));
+    EXPECT_TRUE(pair.ok()) << pair.status();
+    absl::StatusOr<RegistrationResult> got =
+        (*session)->Register(pair->source.points, pair->target.points, options);
+    EXPECT_TRUE(got.ok()) << got.status();
+    return std::make_pair(*got, core::ErrorOf(got->T_target_source, pair->T_target_source));
+  };
+  RegisterOptions finest_round;
+  finest_round.weak_direction_finest_round = true;
+  const auto [blob, blob_error] = register_pair(1, 1, RegisterOptions{});
+  const auto [blob_round, blob_round_error] = register_pair(1, 1, finest_round);
+  EXPECT_GT(blob_error.rotation_deg, 2.0);
+  EXPECT_LT(blob_round_error.rotation_deg, 1.0);
+  EXPECT_EQ(blob_round.start, "weak_direction");
+  EXPECT_EQ(blob_round.starts, blob.starts + 1);
+  RegisterOptions no_centroid;
+  no_centroid.centroid_start = false;
+  const auto [gear, gear_error] = register_pair(3, 95, RegisterOptions{});
+  const auto [gear_off, gear_off_error] = register_pair(3, 95, no_centroid);
+  EXPECT_LT(gear_error.rotation_deg, 1.0);
+  EXPECT_EQ(gear.start, "centroid");
+  EXPECT_GT(gear_off_error.rotation_deg, 5.0);
+  EXPECT_NE(gear_off.start, "centroid");
+}
+
 TEST_F(RpsrClientTest, NoisePolishRunsOnJitteredCloudsAndIsReported) {
   core::PairOptions jittered_options;
   jittered_options.split = core::ObjectSplit::kM2Unseen;
