@@ -250,9 +250,9 @@ void BM_BestWeakDirectionStart(benchmark::State& state) {
   for (auto _ : state) {
     found = 0;
     for (const Answer& a : answers) {
-      found += BestWeakDirectionStart(a.source, a.target, a.refined,
-                                      SymmetryDepth(a.source, a.target))
-                   .has_value();
+      found +=
+          BestWeakDirectionStart(a.source, a.target, a.refined, SymmetryDepth(a.source, a.target))
+              .has_value();
     }
   }
   state.counters["found"] = found;
