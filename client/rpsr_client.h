@@ -165,6 +165,9 @@ struct RegisterOptions {
   // Refine the answer's rotation with the clouds' centres of mass put together too, when the
   // answer is not confident and leaves them apart (proto RegisterOptions.centroid_start).
   bool centroid_start = true;
+  // Refine starts from the clouds' principal axes too when the answer fits poorly and is not
+  // confident (proto RegisterOptions.principal_axes_start).
+  bool principal_axes_start = true;
   // Check a scene-scale answer that puts the two sensors together against a search over the
   // structure off the ground (proto RegisterOptions.sensor_aligned_check); in mode refine a
   // losing answer is kept but doubted (confidence capped, failure_reason naming the other pose).
@@ -235,7 +238,7 @@ struct RegistrationResult {
   std::string mode;
   // Where the returned pose's refinement started ("network", "network_later_passes", "initial",
   // "searched", "searched_turns", "structure", "round_axis", "weak_direction", "centroid",
-  // "symmetric") and how many starts the server refined for this pair (proto
+  // "principal_axes", "symmetric") and how many starts the server refined for this pair (proto
   // RegistrationResult.start, .starts).
   std::string start;
   int starts = 0;

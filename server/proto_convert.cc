@@ -106,6 +106,9 @@ absl::StatusOr<core::RegistrationOptions> OptionsFromProto(const v1::RegisterOpt
     options.search_weak_direction_start = proto.weak_direction_start();
   }
   if (proto.has_centroid_start()) options.search_centroid_start = proto.centroid_start();
+  if (proto.has_principal_axes_start()) {
+    options.search_principal_axes_start = proto.principal_axes_start();
+  }
   if (proto.has_weak_direction_finest_round()) {
     options.weak_direction_finest_round = proto.weak_direction_finest_round();
   }

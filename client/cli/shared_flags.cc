@@ -72,6 +72,12 @@ ABSL_FLAG(bool, centroid_start, true,
           "below 0.9 confidence and leaves the clouds' centres of mass more than half a cell "
           "apart, also refine its rotation with the centres put together, and keep the clearly "
           "better answer");
+ABSL_FLAG(bool, principal_axes_start, true,
+          "eval, register, odometry, bench, net+refine on object-scale trees: when the answer "
+          "fits under 80% of the source and reads below 0.5 confident, also refine starts that "
+          "map the source's principal axes onto the target's (the likeliest two of four sign "
+          "choices), and keep one that fits clearly better and reads at least 0.5 and 0.1 more "
+          "confident");
 ABSL_FLAG(bool, weak_direction_finest_round, false,
           "with --weak_direction_start, when its step kept nothing and the answer is clean and "
           "whole: the same step once more at the finest depth (a little more accurate on clean "
@@ -139,6 +145,7 @@ void ApplyRegistrationFlags(core::RegistrationOptions& options) {
   options.search_weak_direction_start = absl::GetFlag(FLAGS_weak_direction_start);
   options.weak_direction_finest_round = absl::GetFlag(FLAGS_weak_direction_finest_round);
   options.search_centroid_start = absl::GetFlag(FLAGS_centroid_start);
+  options.search_principal_axes_start = absl::GetFlag(FLAGS_principal_axes_start);
   options.check_sensor_aligned_answers = absl::GetFlag(FLAGS_sensor_aligned_check);
   options.refinement.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
   options.refinement.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);

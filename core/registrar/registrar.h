@@ -142,6 +142,20 @@ struct RegistrationOptions {
   // of seed 3 1.04 -> 0.53 degrees: refinement-notes.md, *The centroid-aligned start*. Its answers
   // are taken by the usual rule between starts (clearly better fitness, or closer nodes).
   bool search_centroid_start = true;
+  // net+refine on object-scale trees whose answer is valid, fits under 80% of the source and is
+  // still below principal_axes_max_confidence after the starts above: the source's principal
+  // frame mapped onto the target's (four sign choices, centres together; none when a half turn
+  // maps the target onto itself; core/refine/principal_axes_start.h), the
+  // principal_axes_max_starts leaving the fewest nodes without a partner refined, one kept when it
+  // fits clearly better and reads at least 0.5 and 0.1 more confident. The one start that does
+  // not come from the network's estimate: an estimate tens of degrees off (a real octopus, 45-49
+  // degrees) lies beyond the others'. Unseen study, seeds 1 / 2 / 3: one answer won (45.6 ->
+  // 0.78 degrees under 40% outliers), none lost, no other answer changed; 12 real meshes never
+  // seen before: 6 of 600 answers won, none lost: refinement-notes.md, *The principal-axes start*.
+  // Proto RegisterOptions.principal_axes_start, CLI --principal_axes_start.
+  bool search_principal_axes_start = true;
+  double principal_axes_max_confidence = 0.5;
+  int principal_axes_max_starts = 2;
   // With search_weak_direction_start, when its round kept nothing: the same round once more at the
   // finest depth, for answers that scatter little about the target's surface and overlap nearly
   // whole (WeakDirectionOptions::finest_max_scatter_cells, finest_min_fitness), where a few
@@ -250,10 +264,11 @@ struct RegistrationResult {
   // there, the same search over every turn), "structure" (a further one there, the sensor-aligned
   // check's: check_sensor_aligned_answers), "round_axis" (its third on object-scale trees without
   // near-symmetries, search_round_axis_start), "weak_direction" (a further one there,
-  // search_weak_direction_start), "centroid" (a further one there, search_centroid_start) or
+  // search_weak_direction_start), "centroid" (a further one there, search_centroid_start),
+  // "principal_axes" (a further one on object-scale trees, search_principal_axes_start) or
   // "symmetric" (its third on those with, try_symmetric_starts);
-  // and how many starts were refined for this pair (1-6 on scene-scale trees, 1-6 on
-  // object-scale ones, 7 with weak_direction_finest_round; in mode refine 1, or 2 when the
+  // and how many starts were refined for this pair (1-6 on scene-scale trees, 1-8 on
+  // object-scale ones, 9 with weak_direction_finest_round; in mode refine 1, or 2 when the
   // sensor-aligned check refined another start to doubt the answer; 0 when the pipeline stopped
   // before refining: the network's output not finite).
   std::string start = "network";

@@ -222,6 +222,17 @@ TEST(ProtoConvertTest, CentroidStartIsOnUnlessTurnedOff) {
   EXPECT_FALSE(options->search_centroid_start);
 }
 
+TEST(ProtoConvertTest, PrincipalAxesStartIsOnUnlessTurnedOff) {
+  auto options = OptionsFromProto({});
+  ASSERT_TRUE(options.ok());
+  EXPECT_TRUE(options->search_principal_axes_start);
+  v1::RegisterOptions proto;
+  proto.set_principal_axes_start(false);
+  options = OptionsFromProto(proto);
+  ASSERT_TRUE(options.ok());
+  EXPECT_FALSE(options->search_principal_axes_start);
+}
+
 TEST(ProtoConvertTest, WeakDirectionFinestRoundIsOffUnlessTurnedOn) {
   auto options = OptionsFromProto({});
   ASSERT_TRUE(options.ok());

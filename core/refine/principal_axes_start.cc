@@ -1,0 +1,85 @@
+#include "core/refine/principal_axes_start.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+#include "Eigen/Eigenvalues"
+#include "core/refine/node_closeness.h"
+#include "core/refine/symmetry_starts.h"
+
+namespace rpsr::core {
+namespace {
+
+struct Frame {
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d axes = Eigen::Matrix3d::Identity();  // columns, variances ascending
+  Eigen::Vector3d variances = Eigen::Vector3d::Zero();
+};
+
+Frame FrameOf(const Octree& tree) {
+  Frame out;
+  out.centre = tree.level(0).center_of_mass[0].cast<double>();
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(tree.Covariance(0, 0).cast<double>());
+  out.axes = solver.eigenvectors();
+  out.variances = solver.eigenvalues();
+  return out;
+}
+
+}  // namespace
+
+std::vector<PrincipalAxesStart> PrincipalAxesStarts(const Octree& source, const Octree& target,
+                                                    int depth, double far_cells) {
+  std::vector<PrincipalAxesStart> starts;
+  if (source.num_points() == 0 || target.num_points() == 0) return starts;
+  const Frame s = FrameOf(source);
+  const Frame t = FrameOf(target);
+  // The middle variance must be well above zero (the covariances are floats) for the two largest
+  // axes, and so the frame, to exist.
+  constexpr double kMinVarianceRatio = 1e-6;
+  if (!(s.variances[1] > kMinVarianceRatio * s.variances[2]) ||
+      !(t.variances[1] > kMinVarianceRatio * t.variances[2])) {
+    return starts;
+  }
+  // A target that a half turn about one of its principal axes maps onto itself (a box, a tube, a
+  // vase) does not fix its frame's signs: the flips are its near-twins, and under a crop the
+  // twin that puts the centres together fits better than the slid truth (four unseen objects,
+  // cropped by 10-30%, whose flips read up to 0.99 confident). The threshold is the
+  // near-symmetries' own (SelfSymmetryOptions::max_self_distance_cells).
+  const double max_self_cells = SelfSymmetryOptions{}.max_self_distance_cells;
+  for (int axis = 0; axis < 3; ++axis) {
+    const Eigen::Isometry3d half_turn = Eigen::Translation3d(t.centre) *
+                                        Eigen::AngleAxisd(M_PI, t.axes.col(axis).normalized()) *
+                                        Eigen::Translation3d(-t.centre);
+    const double self = MeanNodeDistanceCells(target, target, half_turn, depth);
+    if (self >= 0.0 && self <= max_self_cells) return starts;
+  }
+  // Sign choices with an even number of flips: each keeps det(S) = 1, so with two rotation
+  // matrices (det(axes) = -1 is fixed by flipping the least-variance axis) R is a rotation.
+  constexpr std::array<std::array<double, 3>, 4> kSigns = {
+      {{1, 1, 1}, {1, -1, -1}, {-1, 1, -1}, {-1, -1, 1}}};
+  Eigen::Matrix3d source_axes = s.axes;
+  Eigen::Matrix3d target_axes = t.axes;
+  if (source_axes.determinant() < 0.0) source_axes.col(0) = -source_axes.col(0);
+  if (target_axes.determinant() < 0.0) target_axes.col(0) = -target_axes.col(0);
+  std::vector<Eigen::Isometry3d> poses;
+  for (const auto& signs : kSigns) {
+    const Eigen::Matrix3d flip = Eigen::Vector3d(signs[0], signs[1], signs[2]).asDiagonal();
+    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+    T.linear() = target_axes * flip * source_axes.transpose();
+    T.translation() = t.centre - T.linear() * s.centre;
+    poses.push_back(T);
+  }
+  const std::vector<double> far = TwoWayFarNodeFractions(source, target, poses, depth, far_cells);
+  for (size_t i = 0; i < poses.size(); ++i) starts.push_back({poses[i], far[i]});
+  std::stable_sort(starts.begin(), starts.end(),
+                   [](const PrincipalAxesStart& a, const PrincipalAxesStart& b) {
+                     const bool a_ok = a.far_fraction >= 0.0;
+                     const bool b_ok = b.far_fraction >= 0.0;
+                     if (a_ok != b_ok) return a_ok;
+                     return a.far_fraction < b.far_fraction;
+                   });
+  return starts;
+}
+
+}  // namespace rpsr::core
