@@ -186,8 +186,8 @@ constexpr double kPrincipalAxesNearDeg = 20.0;
 
 // The principal-axes starts run for valid answers that leave more than a fifth of the source
 // without a partner: on real meshes the answers tens of degrees off fit 0.49-0.63, right ones
-// 0.95 or more on whole objects; an unseen object cropped by 30% whose answer was slid 0.18 (and
-// invalid) fit 0.97, and a half-turned flip refined there fit 0.99 and read 0.988 confident.
+// 0.95 or more on whole objects. An unseen object cropped by 30% whose answer was slid 0.18
+// (invalid, at fitness 0.97) was flipped by half a turn at 0.988 confidence before both gates.
 constexpr double kPrincipalAxesMaxFitness = 0.8;
 
 // A principal-axes start's answer must fit clearly better (ClearlyBetter) and read at least this

@@ -64,7 +64,8 @@ TEST(RegistrarPrincipalAxesStartTest, BringsBackAnAnswerFortyFiveDegreesOff) {
 
 TEST(RegistrarPrincipalAxesStartTest, NearlyRightAnswersAreNotFlippedByHalfATurn) {
   // Seed 1's pair 99 cropped by 30%: slid 0.18 without the start, the right turn (invalid, fitness
-  // 0.97); a flip refined there fits 0.99 at 180 degrees (the fitness gate). Seed 3's pair 71
+  // 0.97); a flip refined there fits 0.99 at 180 degrees (the gates on a valid answer that fits
+  // poorly). Seed 3's pair 71
   // under 40% outliers: 1.3 degrees off at 0.13, a flip read 0.1 more (the confidence floor).
   struct Case {
     uint64_t seed;
