@@ -264,6 +264,23 @@ BENCHMARK(BM_RegisterCentroidStart)
     ->ArgsProduct({{static_cast<int>(RegistrationMode::kNetRefine)}, {0, 2}, {0, 1}})
     ->Unit(benchmark::kMillisecond);
 
+// net+refine with the principal-axes start (pa:1, the default:
+// RegistrationOptions::search_principal_axes_start) and without (pa:0), on the objects (pairs:0)
+// and their jittered copies (pairs:2): four poses scored and two refinements for each valid answer
+// that fits under 80% and reads below 0.5.
+void BM_RegisterPrincipalAxesStart(benchmark::State& state) {
+  const bool principal_axes = state.range(2) != 0;
+  const TreePairs& trees = state.range(1) == 2 ? JitteredObjectTrees() : ObjectTrees();
+  RunRegister(state, trees, false, SharedRegistrar(), {},
+              [principal_axes](RegistrationOptions& options) {
+                options.search_principal_axes_start = principal_axes;
+              });
+}
+BENCHMARK(BM_RegisterPrincipalAxesStart)
+    ->ArgNames({"mode", "pairs", "pa"})
+    ->ArgsProduct({{static_cast<int>(RegistrationMode::kNetRefine)}, {0, 2}, {0, 1}})
+    ->Unit(benchmark::kMillisecond);
+
 // Objects jittered by 0.08, with the noise polish (polish:1) and without (polish:0).
 void BM_RegisterJitteredObjects(benchmark::State& state) {
   RunRegister(state, JitteredObjectTrees(), false, SharedRegistrar(),
