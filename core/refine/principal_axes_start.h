@@ -25,7 +25,7 @@ namespace rpsr::core {
 
 struct PrincipalAxesStart {
   Eigen::Isometry3d T_target_source = Eigen::Isometry3d::Identity();
-  // TwoWayFarNodeFractions at the scoring depth (negative: unmeasurable, sorted last).
+  // TwoWayFarNodeFractions at the scoring depth (negative: unmeasurable, for all four alike).
   double far_fraction = -1.0;
 };
 

@@ -61,34 +61,22 @@ int StrongestFold(const Octree& tree, const Eigen::Vector3d& centre, const Eigen
   return best;
 }
 
-// The target's principal axes through its centre of mass, and which are round: the two other
-// principal variances within options.min_round_ratio of each other (an n-fold symmetry, or a
-// body of revolution, needs that).
-struct PrincipalAxes {
-  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-  Eigen::Matrix3d axes = Eigen::Matrix3d::Identity();  // columns, variances ascending
-  std::array<bool, 3> round = {false, false, false};
-  // min / max of the two other principal variances (1: perfectly round about the axis).
-  std::array<double, 3> roundness = {0.0, 0.0, 0.0};
-};
+}  // namespace
 
-PrincipalAxes PrincipalAxesOf(const Octree& target, const SelfSymmetryOptions& options) {
+PrincipalAxes PrincipalAxesOf(const Octree& tree, const SelfSymmetryOptions& options) {
   PrincipalAxes out;
-  out.centre = target.level(0).center_of_mass[0].cast<double>();
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(
-      target.Covariance(0, 0).cast<double>());
+  out.centre = tree.level(0).center_of_mass[0].cast<double>();
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(tree.Covariance(0, 0).cast<double>());
   out.axes = solver.eigenvectors();
-  const Eigen::Vector3d variances = solver.eigenvalues();  // ascending
+  out.variances = solver.eigenvalues();  // ascending
   for (int axis = 0; axis < 3; ++axis) {
-    const double a = variances[(axis + 1) % 3];
-    const double b = variances[(axis + 2) % 3];
+    const double a = out.variances[(axis + 1) % 3];
+    const double b = out.variances[(axis + 2) % 3];
     out.roundness[axis] = std::max(a, b) > 0.0 ? std::min(a, b) / std::max(a, b) : 0.0;
     out.round[axis] = std::max(a, b) > 0.0 && out.roundness[axis] >= options.min_round_ratio;
   }
   return out;
 }
-
-}  // namespace
 
 int SymmetryDepth(const Octree& source, const Octree& target) {
   return std::max(std::min(source.max_depth(), target.max_depth()) - 1, 1);

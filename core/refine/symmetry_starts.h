@@ -20,6 +20,7 @@
 #ifndef RPSR_CORE_REFINE_SYMMETRY_STARTS_H_
 #define RPSR_CORE_REFINE_SYMMETRY_STARTS_H_
 
+#include <array>
 #include <cstdint>
 #include <optional>
 #include <vector>
@@ -226,6 +227,20 @@ bool AreSymmetricTwins(const Octree& source, const Octree& target, const Eigen::
 
 // The depth both use: one above the shallower tree's deepest (at least 1).
 int SymmetryDepth(const Octree& source, const Octree& target);
+
+// A tree's principal axes through its centre of mass (the root node's covariance), and which are
+// round: the two other principal variances within options.min_round_ratio of each other (an
+// n-fold symmetry, or a body of revolution, needs that). The near-symmetries look about them; the
+// principal-axes start (principal_axes_start.h) maps one cloud's onto the other's.
+struct PrincipalAxes {
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d axes = Eigen::Matrix3d::Identity();   // columns, variances ascending
+  Eigen::Vector3d variances = Eigen::Vector3d::Zero();  // ascending
+  std::array<bool, 3> round = {false, false, false};
+  // min / max of the two other principal variances (1: perfectly round about the axis).
+  std::array<double, 3> roundness = {0.0, 0.0, 0.0};
+};
+PrincipalAxes PrincipalAxesOf(const Octree& tree, const SelfSymmetryOptions& options = {});
 
 }  // namespace rpsr::core
 

@@ -181,8 +181,15 @@ constexpr double kConfidentEnough = 0.9;
 constexpr double kCentroidStartMinCells = 0.5;
 
 // A principal-axes start this close to the answer (degrees of rotation between them) would be
-// refined back onto it; the right flip of a poor answer lay 45-50 degrees from it.
+// refined back onto it; the right flip of a poor answer lay 43-49 degrees from it.
 constexpr double kPrincipalAxesNearDeg = 20.0;
+
+// The principal-axes starts run for answers below this confidence (a poor answer: the start owes
+// nothing to the network's estimate, and its flips are refined only where that one is doubted),
+// and refine at most this many of the four sign choices, the likeliest first (the right one was
+// the likeliest on the real meshes' misses).
+constexpr double kPrincipalAxesMaxAnswerConfidence = 0.5;
+constexpr int kPrincipalAxesMaxStarts = 2;
 
 // The principal-axes starts run for valid answers that leave more than a fifth of the source
 // without a partner: on real meshes the answers tens of degrees off fit 0.49-0.63, right ones
@@ -708,14 +715,14 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   // (kPrincipalAxesConfidenceGain).
   if (net_refine && options.search_principal_axes_start && best.valid &&
       best.fitness < kPrincipalAxesMaxFitness &&
-      result.confidence < options.principal_axes_max_confidence &&
+      result.confidence < kPrincipalAxesMaxAnswerConfidence &&
       !IsDeepPair(source, target, refinement)) {
     const int depth = SymmetryDepth(source, target);
     const std::vector<PrincipalAxesStart> flips =
         PrincipalAxesStarts(source, target, depth, WeakDirectionOptions{}.far_cells);
     int tried = 0;
     for (const PrincipalAxesStart& flip : flips) {
-      if (tried >= options.principal_axes_max_starts) break;
+      if (tried >= kPrincipalAxesMaxStarts) break;
       if (ErrorOf(flip.T_target_source, best.T_target_source).rotation_deg <
           kPrincipalAxesNearDeg) {
         continue;

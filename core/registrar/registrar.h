@@ -143,19 +143,17 @@ struct RegistrationOptions {
   // are taken by the usual rule between starts (clearly better fitness, or closer nodes).
   bool search_centroid_start = true;
   // net+refine on object-scale trees whose answer is valid, fits under 80% of the source and is
-  // still below principal_axes_max_confidence after the starts above: the source's principal
-  // frame mapped onto the target's (four sign choices, centres together; none when a half turn
-  // maps the target onto itself; core/refine/principal_axes_start.h), the
-  // principal_axes_max_starts leaving the fewest nodes without a partner refined, one kept when it
-  // fits clearly better and reads at least 0.5 and 0.1 more confident. The one start that does
+  // still below 0.5 confident after the starts above: the source's principal frame mapped onto
+  // the target's (four sign choices, centres together; none when a half turn maps the target onto
+  // itself; core/refine/principal_axes_start.h), the two leaving the fewest nodes without a
+  // partner refined, one kept when it fits clearly better and reads at least 0.5 and 0.1 more
+  // confident. The one start that does
   // not come from the network's estimate: an estimate tens of degrees off (a real octopus, 45-49
   // degrees) lies beyond the others'. Unseen study, seeds 1 / 2 / 3: one answer won (45.6 ->
   // 0.78 degrees under 40% outliers), none lost, no other answer changed; 12 real meshes never
   // seen before: 6 of 600 answers won, none lost: refinement-notes.md, *The principal-axes start*.
   // Proto RegisterOptions.principal_axes_start, CLI --principal_axes_start.
   bool search_principal_axes_start = true;
-  double principal_axes_max_confidence = 0.5;
-  int principal_axes_max_starts = 2;
   // With search_weak_direction_start, when its round kept nothing: the same round once more at the
   // finest depth, for answers that scatter little about the target's surface and overlap nearly
   // whole (WeakDirectionOptions::finest_max_scatter_cells, finest_min_fitness), where a few

@@ -7,52 +7,33 @@
 #include <cstdio>
 #include <vector>
 
-#include "core/data/object_pairs.h"
-#include "core/data/registration_metrics.h"
-#include "core/data/training_pairs.h"
 #include "core/registrar/registrar.h"
-#include "core/synth/seeded_random.h"
 #include "gtest/gtest.h"
 #include "tests/core/registrar/registrar_test_util.h"
 
 namespace rpsr::core {
 namespace {
 
-struct Answers {
-  RegistrationResult without;
-  RegistrationResult with;
-  PairError error_without;
-  PairError error_with;
-};
+using testing_util::AnswersWithAndWithout;
 
-// Pair i of `rpsr eval --protocol objects --split unseen --seed S --disturbance D --level L`.
-Answers RegisterWithAndWithout(uint64_t seed, uint64_t i, DisturbanceKind disturbance, int level) {
-  PairOptions options;
-  options.split = ObjectSplit::kM2Unseen;
-  options.disturbance = disturbance;
-  options.disturbance_level = level;
-  absl::StatusOr<ObjectPair> pair = MakeObjectPair(options, DeriveSeed(seed, i));
-  EXPECT_TRUE(pair.ok()) << pair.status();
-  const Octree source = testing_util::TreeOf(pair->source, 6);
-  const Octree target = testing_util::TreeOf(pair->target, 6);
+// Pair i of `rpsr eval --protocol objects --split unseen --seed S --disturbance D --level L`,
+// without the start and with it.
+AnswersWithAndWithout RegisterWithAndWithout(uint64_t seed, uint64_t i, DisturbanceKind disturbance,
+                                             int level) {
   RegistrationOptions without;
   without.search_principal_axes_start = false;
   RegistrationOptions with;
   with.search_principal_axes_start = true;
-  absl::StatusOr<RegistrationResult> a =
-      testing_util::SharedRegistrar().Register(source, target, without);
-  absl::StatusOr<RegistrationResult> b =
-      testing_util::SharedRegistrar().Register(source, target, with);
-  EXPECT_TRUE(a.ok() && b.ok());
-  Answers answers{*std::move(a), *std::move(b), {}, {}};
-  answers.error_without = ErrorOf(answers.without.T_target_source, pair->T_target_source);
-  answers.error_with = ErrorOf(answers.with.T_target_source, pair->T_target_source);
-  return answers;
+  absl::StatusOr<AnswersWithAndWithout> answers =
+      testing_util::RegisterStudyPair(seed, i, without, with, disturbance, level);
+  EXPECT_TRUE(answers.ok()) << answers.status();
+  return answers.ok() ? *std::move(answers) : AnswersWithAndWithout{};
 }
 
 TEST(RegistrarPrincipalAxesStartTest, BringsBackAnAnswerFortyFiveDegreesOff) {
   // Seed 2's pair 59 under 40% outliers: 45.6 degrees off without the start.
-  const Answers answers = RegisterWithAndWithout(2, 59, DisturbanceKind::kUniformOutliers, 4);
+  const AnswersWithAndWithout answers =
+      RegisterWithAndWithout(2, 59, DisturbanceKind::kUniformOutliers, 4);
   EXPECT_GT(answers.error_without.rotation_deg, 20.0);
   EXPECT_LT(answers.without.confidence, 0.1);
   EXPECT_LE(answers.error_with.rotation_deg, 1.0);
@@ -75,7 +56,8 @@ TEST(RegistrarPrincipalAxesStartTest, NearlyRightAnswersAreNotFlippedByHalfATurn
   };
   for (const Case& c : {Case{1, 99, DisturbanceKind::kCrop, 3},
                         Case{3, 71, DisturbanceKind::kUniformOutliers, 4}}) {
-    const Answers answers = RegisterWithAndWithout(c.seed, c.pair, c.disturbance, c.level);
+    const AnswersWithAndWithout answers =
+        RegisterWithAndWithout(c.seed, c.pair, c.disturbance, c.level);
     EXPECT_LT(answers.error_without.rotation_deg, 2.0) << c.pair;
     EXPECT_LT(answers.error_with.rotation_deg, 2.0) << c.pair;
     EXPECT_NE(answers.with.start, "principal_axes") << c.pair;
@@ -89,7 +71,8 @@ TEST(RegistrarPrincipalAxesStartTest, AnswersAreKeptWhereTheStartKeepsNothing) {
   int ran = 0;
   int kept = 0;
   for (uint64_t i = 40; i < 70; ++i) {
-    const Answers answers = RegisterWithAndWithout(2, i, DisturbanceKind::kUniformOutliers, 4);
+    const AnswersWithAndWithout answers =
+        RegisterWithAndWithout(2, i, DisturbanceKind::kUniformOutliers, 4);
     if (answers.error_without.rotation_deg <= 1.0 && answers.error_without.translation <= 0.01) {
       EXPECT_LE(answers.error_with.rotation_deg, 1.0) << "pair " << i;
       EXPECT_LE(answers.error_with.translation, 0.01) << "pair " << i;

@@ -7,8 +7,10 @@
 #include <random>
 
 #include "core/data/object_pairs.h"
+#include "core/data/registration_metrics.h"
 #include "core/data/transform_convention.h"
 #include "core/registrar/registrar.h"
+#include "core/synth/seeded_random.h"
 #include "core/synth/shape_families.h"
 #include "gtest/gtest.h"
 #include "tests/core/refine/refinement_test_geometry.h"
@@ -46,6 +48,36 @@ inline ObjectPair AsymmetricObjectPair(uint64_t seed, double max_angle_deg) {
     EXPECT_TRUE(pair.ok()) << pair.status();
     if (ShapeFamilies()[pair->family_index].symmetry == RotationalSymmetry::kNone) return *pair;
   }
+}
+
+// The unseen pair `i` of pair seed `seed` (the study's `--seed`; `disturbance` at `level`, as
+// `rpsr eval --disturbance D --level L`), on trees of depth 6, registered with `without` and with
+// `with`, and both answers' errors.
+struct AnswersWithAndWithout {
+  RegistrationResult without;
+  RegistrationResult with;
+  PairError error_without;
+  PairError error_with;
+};
+inline absl::StatusOr<AnswersWithAndWithout> RegisterStudyPair(
+    uint64_t seed, uint64_t i, const RegistrationOptions& without, const RegistrationOptions& with,
+    DisturbanceKind disturbance = DisturbanceKind::kNone, int level = 0) {
+  PairOptions options;
+  options.split = ObjectSplit::kM2Unseen;
+  options.disturbance = disturbance;
+  options.disturbance_level = level;
+  absl::StatusOr<ObjectPair> pair = MakeObjectPair(options, DeriveSeed(seed, i));
+  if (!pair.ok()) return pair.status();
+  const Octree source = TreeOf(pair->source, 6);
+  const Octree target = TreeOf(pair->target, 6);
+  absl::StatusOr<RegistrationResult> a = SharedRegistrar().Register(source, target, without);
+  if (!a.ok()) return a.status();
+  absl::StatusOr<RegistrationResult> b = SharedRegistrar().Register(source, target, with);
+  if (!b.ok()) return b.status();
+  AnswersWithAndWithout answers{*std::move(a), *std::move(b), {}, {}};
+  answers.error_without = ErrorOf(answers.without.T_target_source, pair->T_target_source);
+  answers.error_with = ErrorOf(answers.with.T_target_source, pair->T_target_source);
+  return answers;
 }
 
 }  // namespace rpsr::core::testing_util

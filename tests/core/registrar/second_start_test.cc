@@ -26,6 +26,8 @@ namespace {
 
 using ::testing::HasSubstr;
 using ::testing::Not;
+using testing_util::AnswersWithAndWithout;
+using testing_util::RegisterStudyPair;
 using testing_util::SharedRegistrar;
 using testing_util::TreeOf;
 
@@ -405,33 +407,6 @@ TEST(RegistrarSecondStartTest, RoundAxisStartTurnsAMugBackOntoItsHandle) {
   }
   std::printf("mugs turned back by the round-axis start: %d of 16\n", settled);
   EXPECT_GE(settled, 1);
-}
-
-// The clean unseen pair `i` of pair seed `seed` (the study's `--seed`), on trees of depth 6,
-// registered with `without` and with `with`, and both answers' errors.
-struct AnswersWithAndWithout {
-  RegistrationResult without;
-  RegistrationResult with;
-  PairError error_without;
-  PairError error_with;
-};
-absl::StatusOr<AnswersWithAndWithout> RegisterStudyPair(uint64_t seed, uint64_t i,
-                                                        const RegistrationOptions& without,
-                                                        const RegistrationOptions& with) {
-  PairOptions options;
-  options.split = ObjectSplit::kM2Unseen;
-  absl::StatusOr<ObjectPair> pair = MakeObjectPair(options, DeriveSeed(seed, i));
-  if (!pair.ok()) return pair.status();
-  const Octree source = TreeOf(pair->source, 6);
-  const Octree target = TreeOf(pair->target, 6);
-  absl::StatusOr<RegistrationResult> a = SharedRegistrar().Register(source, target, without);
-  if (!a.ok()) return a.status();
-  absl::StatusOr<RegistrationResult> b = SharedRegistrar().Register(source, target, with);
-  if (!b.ok()) return b.status();
-  AnswersWithAndWithout answers{*std::move(a), *std::move(b), {}, {}};
-  answers.error_without = ErrorOf(answers.without.T_target_source, pair->T_target_source);
-  answers.error_with = ErrorOf(answers.with.T_target_source, pair->T_target_source);
-  return answers;
 }
 
 // net+refine's weak-direction start (RegistrationOptions::search_weak_direction_start) on the
