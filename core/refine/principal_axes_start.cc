@@ -28,10 +28,8 @@ std::vector<PrincipalAxesStart> PrincipalAxesStarts(const Octree& source, const 
   // threshold is the near-symmetries' own (SelfSymmetryOptions::max_self_distance_cells).
   const double max_self_cells = SelfSymmetryOptions{}.max_self_distance_cells;
   for (int axis = 0; axis < 3; ++axis) {
-    const Eigen::Isometry3d half_turn = Eigen::Translation3d(t.centre) *
-                                        Eigen::AngleAxisd(M_PI, t.axes.col(axis).normalized()) *
-                                        Eigen::Translation3d(-t.centre);
-    const double self = MeanNodeDistanceCells(target, target, half_turn, depth);
+    const double self = MeanNodeDistanceCells(
+        target, target, TurnAbout(t.centre, t.axes.col(axis).normalized(), M_PI), depth);
     if (self >= 0.0 && self <= max_self_cells) return starts;
   }
   // Sign choices with an even number of flips: each keeps det(S) = 1, so with two rotation

@@ -10,7 +10,6 @@
 #include "core/refine/tree_refinement.h"
 
 namespace rpsr::core {
-namespace {
 
 Eigen::Isometry3d TurnAbout(const Eigen::Vector3d& centre, const Eigen::Vector3d& axis,
                             double angle_rad) {
@@ -19,6 +18,8 @@ Eigen::Isometry3d TurnAbout(const Eigen::Vector3d& centre, const Eigen::Vector3d
   S.translation() = centre - S.linear() * centre;
   return S;
 }
+
+namespace {
 
 // The fold n in 3..max_folds whose circular harmonic of the finest nodes' angles about `axis`
 // (through `centre`, each node weighted by its distance from the axis: a rim's teeth outweigh a

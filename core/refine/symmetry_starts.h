@@ -228,6 +228,10 @@ bool AreSymmetricTwins(const Octree& source, const Octree& target, const Eigen::
 // The depth both use: one above the shallower tree's deepest (at least 1).
 int SymmetryDepth(const Octree& source, const Octree& target);
 
+// The turn by `angle_rad` about the line through `centre` along the unit `axis`.
+Eigen::Isometry3d TurnAbout(const Eigen::Vector3d& centre, const Eigen::Vector3d& axis,
+                            double angle_rad);
+
 // A tree's principal axes through its centre of mass (the root node's covariance), and which are
 // round: the two other principal variances within options.min_round_ratio of each other (an
 // n-fold symmetry, or a body of revolution, needs that). The near-symmetries look about them; the

@@ -252,16 +252,21 @@ BENCHMARK(BM_RegisterWeakDirectionStart)
     ->ArgsProduct({{static_cast<int>(RegistrationMode::kNetRefine)}, {0, 2}, {0, 1, 2}})
     ->Unit(benchmark::kMillisecond);
 
+// Registers the objects (pairs:0) or their jittered copies (pairs:2) with one of the registrar's
+// on/off switches set to the third argument (0 or 1): the start benchmarks below.
+void RunObjectsWithSwitch(benchmark::State& state, bool RegistrationOptions::*on_off) {
+  const bool on = state.range(2) != 0;
+  const TreePairs& trees = state.range(1) == 2 ? JitteredObjectTrees() : ObjectTrees();
+  RunRegister(state, trees, false, SharedRegistrar(), {},
+              [on, on_off](RegistrationOptions& options) { options.*on_off = on; });
+}
+
 // net+refine with the centroid-aligned start (centroid:1, the default:
 // RegistrationOptions::search_centroid_start) and without (centroid:0), on the objects (pairs:0)
 // and their jittered copies (pairs:2): a refinement more for each unconfident answer that leaves
 // the clouds' centres of mass apart.
 void BM_RegisterCentroidStart(benchmark::State& state) {
-  const bool centroid = state.range(2) != 0;
-  const TreePairs& trees = state.range(1) == 2 ? JitteredObjectTrees() : ObjectTrees();
-  RunRegister(state, trees, false, SharedRegistrar(), {}, [centroid](RegistrationOptions& options) {
-    options.search_centroid_start = centroid;
-  });
+  RunObjectsWithSwitch(state, &RegistrationOptions::search_centroid_start);
 }
 BENCHMARK(BM_RegisterCentroidStart)
     ->ArgNames({"mode", "pairs", "centroid"})
@@ -273,12 +278,7 @@ BENCHMARK(BM_RegisterCentroidStart)
 // and their jittered copies (pairs:2): four poses scored and two refinements for each valid answer
 // that fits under 80% and reads below 0.5.
 void BM_RegisterPrincipalAxesStart(benchmark::State& state) {
-  const bool principal_axes = state.range(2) != 0;
-  const TreePairs& trees = state.range(1) == 2 ? JitteredObjectTrees() : ObjectTrees();
-  RunRegister(state, trees, false, SharedRegistrar(), {},
-              [principal_axes](RegistrationOptions& options) {
-                options.search_principal_axes_start = principal_axes;
-              });
+  RunObjectsWithSwitch(state, &RegistrationOptions::search_principal_axes_start);
 }
 BENCHMARK(BM_RegisterPrincipalAxesStart)
     ->ArgNames({"mode", "pairs", "pa"})
