@@ -34,7 +34,11 @@ ABSL_FLAG(uint64_t, pair_seed, 0,
           "1003 with --evaluate (a held-out set)");
 ABSL_FLAG(int, object_pairs, 4,
           "object pairs per split (m1, seen, unseen) and setting (clean + 4 disturbances x 5 "
-          "levels)");
+          "levels, + partial views x 5 levels with --partial_views)");
+ABSL_FLAG(bool, partial_views, false,
+          "also partial views (both clouds cropped, each along its own direction) at the five "
+          "levels, after the paper's 21 settings (whose pairs stay the same); the shipped fits "
+          "are without them");
 ABSL_FLAG(int, lidar_pairs, 32, "simulated LiDAR pairs per frame offset (5 and 10)");
 ABSL_FLAG(int, unrelated_pairs, 0,
           "unrelated pairs of each kind (two random volumes, two objects of different families, "
@@ -152,7 +156,8 @@ int RunCalibrateCommand(const std::vector<std::string>& /*args*/) {
     std::fprintf(stderr,
                  "rpsr calibrate does not take %s: it measures the shipped pipeline (modes net, "
                  "net+refine and refine with their defaults) on its own seeded pairs; choose "
-                 "them with --pair_seed, --object_pairs, --lidar_pairs and --unrelated_pairs\n",
+                 "them with --pair_seed, --object_pairs, --partial_views, --lidar_pairs and "
+                 "--unrelated_pairs\n",
                  absl::StrJoin(refused, ", ").c_str());
     return 2;
   }
@@ -185,6 +190,7 @@ int RunCalibrateCommand(const std::vector<std::string>& /*args*/) {
   const uint64_t flag_seed = absl::GetFlag(FLAGS_pair_seed);
   options.seed = flag_seed != 0 ? flag_seed : (evaluate ? kEvaluateSeed : kFitSeed);
   options.object_pairs_per_setting = absl::GetFlag(FLAGS_object_pairs);
+  options.partial_views = absl::GetFlag(FLAGS_partial_views);
   options.lidar_pairs_per_offset = absl::GetFlag(FLAGS_lidar_pairs);
   options.unrelated_pairs_per_kind = absl::GetFlag(FLAGS_unrelated_pairs);
   options.threads = std::max(1, absl::GetFlag(FLAGS_jobs));
@@ -207,9 +213,10 @@ int RunCalibrateCommand(const std::vector<std::string>& /*args*/) {
   }
   const std::string set_description = absl::StrFormat(
       "pair seed %d: %d object pairs per split (m1, seen, unseen) and setting (clean + noise, "
-      "outliers, crop, jitter x 5 levels), %d simulated LiDAR pairs per frame offset (5, 10); "
+      "outliers, crop, jitter%s x 5 levels), %d simulated LiDAR pairs per frame offset (5, 10); "
       "%smodes net, net+refine, refine: %d samples (%.0f s)",
-      options.seed, options.object_pairs_per_setting, options.lidar_pairs_per_offset,
+      options.seed, options.object_pairs_per_setting,
+      options.partial_views ? ", partial views" : "", options.lidar_pairs_per_offset,
       options.unrelated_pairs_per_kind == 0
           ? std::string()
           : absl::StrFormat("%d unrelated pairs of each kind (volumes, objects, scans); ",

@@ -140,6 +140,12 @@ absl::StatusOr<std::vector<CalibrationSample>> CollectCalibrationSamples(
                                DisturbanceKind::kCrop, DisturbanceKind::kJitter}) {
     for (int level = 0; level < kNumDisturbanceLevels; ++level) settings.push_back({kind, level});
   }
+  // Appended after the paper's 21 so that their pairs (seeded by their index) stay the same.
+  if (options.partial_views) {
+    for (int level = 0; level < kNumDisturbanceLevels; ++level) {
+      settings.push_back({DisturbanceKind::kPartialViews, level});
+    }
+  }
   for (ObjectSplit split : options.object_splits) {
     for (size_t k = 0; k < settings.size(); ++k) {
       const auto [kind, level] = settings[k];

@@ -228,6 +228,36 @@ TEST(ShippedCalibrationTest, ReliableOnASmallSeededSetOfBothProtocols) {
   EXPECT_GT(success_sum / successes, failure_sum / failures + 0.4);
 }
 
+// Partial views join the calibration set after the paper's 21 settings, whose pairs (seeded by
+// their index) stay the same, so held-out figures with and without them compare.
+TEST(CalibrationSetTest, PartialViewsAreAppendedWithoutChangingTheOtherPairs) {
+  CalibrationSetOptions options;
+  options.seed = 2025;
+  options.object_splits = {ObjectSplit::kM2Unseen};
+  options.object_pairs_per_setting = 1;
+  options.lidar_pairs_per_offset = 0;
+  options.modes = {RegistrationMode::kNet};
+  options.threads = 2;
+  auto paper = CollectCalibrationSamples(testing_util::SharedRegistrar(), options);
+  options.partial_views = true;
+  auto with_partial = CollectCalibrationSamples(testing_util::SharedRegistrar(), options);
+  ASSERT_TRUE(paper.ok()) << paper.status();
+  ASSERT_TRUE(with_partial.ok()) << with_partial.status();
+  ASSERT_EQ(paper->size(), 21u);
+  ASSERT_EQ(with_partial->size(), 26u);
+  for (size_t i = 0; i < paper->size(); ++i) {
+    EXPECT_EQ((*with_partial)[i].setting, (*paper)[i].setting);
+    EXPECT_EQ((*with_partial)[i].rotation_error_deg, (*paper)[i].rotation_error_deg) << i;
+    EXPECT_EQ((*with_partial)[i].translation_error_rel, (*paper)[i].translation_error_rel) << i;
+  }
+  std::set<std::string> partial_settings;
+  for (size_t i = paper->size(); i < with_partial->size(); ++i) {
+    EXPECT_THAT((*with_partial)[i].setting, HasSubstr("partial_views@"));
+    partial_settings.insert((*with_partial)[i].setting);
+  }
+  EXPECT_EQ(partial_settings.size(), 5u);  // one per level
+}
+
 // A gear refined from a start a tooth off ends a tooth off, fitting as well as at the truth; the
 // twin margin (how many more of the target's pin nodes the answer's pin meets than its best twin's
 // does) says so, and the shipped confidence reads it. An object without a symmetry reads 1.
