@@ -109,6 +109,7 @@ absl::StatusOr<core::RegistrationOptions> OptionsFromProto(const v1::RegisterOpt
   if (proto.has_principal_axes_start()) {
     options.search_principal_axes_start = proto.principal_axes_start();
   }
+  if (proto.has_extent_slide()) options.search_extent_slide = proto.extent_slide();
   if (proto.has_weak_direction_finest_round()) {
     options.weak_direction_finest_round = proto.weak_direction_finest_round();
   }

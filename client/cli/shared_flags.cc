@@ -78,6 +78,11 @@ ABSL_FLAG(bool, principal_axes_start, true,
           "map the source's principal axes onto the target's (the likeliest two of four sign "
           "choices), and keep one that fits clearly better and reads at least 0.5 and 0.1 more "
           "confident");
+ABSL_FLAG(bool, extent_slide, true,
+          "eval, register, odometry, bench, net+refine on object-scale trees without "
+          "near-symmetries: move the answer along its least constrained direction until the "
+          "clouds' outermost nodes agree at both ends (a laptop slid along its hinge), and keep "
+          "it when it fits as well");
 ABSL_FLAG(bool, weak_direction_finest_round, false,
           "with --weak_direction_start, when its step kept nothing and the answer is clean and "
           "whole: the same step once more at the finest depth (a little more accurate on clean "
@@ -146,6 +151,7 @@ void ApplyRegistrationFlags(core::RegistrationOptions& options) {
   options.weak_direction_finest_round = absl::GetFlag(FLAGS_weak_direction_finest_round);
   options.search_centroid_start = absl::GetFlag(FLAGS_centroid_start);
   options.search_principal_axes_start = absl::GetFlag(FLAGS_principal_axes_start);
+  options.search_extent_slide = absl::GetFlag(FLAGS_extent_slide);
   options.check_sensor_aligned_answers = absl::GetFlag(FLAGS_sensor_aligned_check);
   options.refinement.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
   options.refinement.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);

@@ -20,6 +20,7 @@
 #include "core/refine/correlative_start.h"
 #include "core/refine/degenerate_hold.h"
 #include "core/refine/dominant_plane.h"
+#include "core/refine/extent_slide.h"
 #include "core/refine/node_closeness.h"
 #include "core/refine/principal_axes_start.h"
 #include "core/refine/symmetry_starts.h"
@@ -771,6 +772,29 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
     if (!try_weak_direction(depth) && options.weak_direction_finest_round && depth < finest_depth &&
         weak.FinestRoundAdmits(best.surface_scatter_cells, best.fitness)) {
       try_weak_direction(finest_depth);
+    }
+  }
+  // The extent slide (RegistrationOptions::search_extent_slide): object-scale trees without
+  // near-symmetries or a round axis, whatever the confidence. The answer moved along its weakest
+  // direction until the clouds' ends agree (core/refine/extent_slide.h) is measured there, not
+  // refined: the refinement's cost is flat along that direction (refined at the finest depth alone
+  // from the moved pose, the laptops looked at stayed where it put them), and the stages above
+  // would carry it back to where their coarse cells' minimum lies. Kept when valid and fitting
+  // within kTwinFitnessSlack of the answer: by fitness the two are alike.
+  if (net_refine && options.search_extent_slide && best.valid && symmetries.empty() &&
+      !revolution.has_value() && !IsDeepPair(source, target, refinement)) {
+    if (std::optional<ExtentSlide> slid = SlideToMatchExtents(source, target, best, finest_depth)) {
+      TreeRefinementOptions measure = refinement;
+      measure.evaluate_only = true;
+      absl::StatusOr<TreeRefinementResult> r =
+          RefineWithFallback(source, target, slid->T_target_source, measure, cache);
+      ++result.starts;
+      if (r.ok() && r->valid && r->fitness >= best.fitness - kTwinFitnessSlack) {
+        settle(*r, slid->T_target_source, result);
+        result.start = "extent_slide";
+        best = *std::move(r);
+        best_closeness.reset();
+      }
     }
   }
   // The symmetric start (RegistrationOptions::try_symmetric_starts): object-scale trees whose

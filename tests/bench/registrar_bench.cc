@@ -285,6 +285,18 @@ BENCHMARK(BM_RegisterPrincipalAxesStart)
     ->ArgsProduct({{static_cast<int>(RegistrationMode::kNetRefine)}, {0, 2}, {0, 1}})
     ->Unit(benchmark::kMillisecond);
 
+// net+refine with the extent slide (slide:1, the default: RegistrationOptions::search_extent_slide)
+// and without (slide:0), on the objects (pairs:0) and their jittered copies (pairs:2): six extent
+// reads of the finest nodes for each valid answer without near-symmetries, and one measurement at
+// the moved pose where both ends agree.
+void BM_RegisterExtentSlide(benchmark::State& state) {
+  RunObjectsWithSwitch(state, &RegistrationOptions::search_extent_slide);
+}
+BENCHMARK(BM_RegisterExtentSlide)
+    ->ArgNames({"mode", "pairs", "slide"})
+    ->ArgsProduct({{static_cast<int>(RegistrationMode::kNetRefine)}, {0, 2}, {0, 1}})
+    ->Unit(benchmark::kMillisecond);
+
 // Objects jittered by 0.08, with the noise polish (polish:1) and without (polish:0).
 void BM_RegisterJitteredObjects(benchmark::State& state) {
   RunRegister(state, JitteredObjectTrees(), false, SharedRegistrar(),

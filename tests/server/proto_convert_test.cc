@@ -233,6 +233,17 @@ TEST(ProtoConvertTest, PrincipalAxesStartIsOnUnlessTurnedOff) {
   EXPECT_FALSE(options->search_principal_axes_start);
 }
 
+TEST(ProtoConvertTest, ExtentSlideIsOnUnlessTurnedOff) {
+  auto options = OptionsFromProto({});
+  ASSERT_TRUE(options.ok());
+  EXPECT_TRUE(options->search_extent_slide);
+  v1::RegisterOptions proto;
+  proto.set_extent_slide(false);
+  options = OptionsFromProto(proto);
+  ASSERT_TRUE(options.ok());
+  EXPECT_FALSE(options->search_extent_slide);
+}
+
 TEST(ProtoConvertTest, WeakDirectionFinestRoundIsOffUnlessTurnedOn) {
   auto options = OptionsFromProto({});
   ASSERT_TRUE(options.ok());
