@@ -48,7 +48,7 @@ std::optional<ExtentSlide> SlideToMatchExtents(const Octree& source, const Octre
   // (The answer itself comes back when the information has no weakest direction.)
   const Eigen::Vector3d centre = source.level(0).center_of_mass[0].cast<double>();
   const Eigen::Vector3d moved = probed * centre - at * centre;
-  if (!(moved.norm() >= options.min_centre_motion * probe)) return std::nullopt;
+  if (!(moved.norm() >= options.min_centre_share * probe)) return std::nullopt;
   const Eigen::Vector3d axis = moved.normalized();
   // Each end: the target's reach, the source's at the answer and at the probe, and so how far
   // along the weakest direction that end asks the source to move.
@@ -61,7 +61,7 @@ std::optional<ExtentSlide> SlideToMatchExtents(const Octree& source, const Octre
     const double then = ExtentAlong(source, depth, probed, a, options.rank);
     const double rate = (then - now) / probe;  // ~ +1 at the end ahead, ~ -1 at the one behind
     if (!std::isfinite(wanted) || !std::isfinite(now) ||
-        !(std::abs(rate) >= options.min_centre_motion)) {
+        !(std::abs(rate) >= options.min_end_rate)) {
       return std::nullopt;
     }
     slides[end] = (wanted - now) / rate;

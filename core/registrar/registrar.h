@@ -172,10 +172,11 @@ struct RegistrationOptions {
   // without refining (a refinement from it, even at the finest depth alone, leaves it where the
   // answer was: the cost is flat along that direction) and kept when valid and fitting within
   // 0.05 of the answer. Unseen study (21 settings x 100 pairs), seeds 1 / 2 / 3: mean recall at
-  // (1 deg, 0.01) 0.8567 / 0.8648 / 0.8657 -> 0.8686 / 0.8724 / 0.8800 (84 answers won, 13 lost,
-  // under noise and jitter), clean translation RMSE 0.0070 / 0.0075 / 0.0088 -> 0.0034 / 0.0023 /
-  // 0.0041; held-out calibration set objects net+refine 851 -> 860 of 1,008 within (1 deg, 1%):
-  // refinement-notes.md, *The extent slide*. Proto RegisterOptions.extent_slide, CLI
+  // (1 deg, 0.01) 0.8567 / 0.8648 / 0.8657 -> 0.8690 / 0.8729 / 0.8814 (84 answers won, 8 lost,
+  // under noise, outliers, crops and jitter), clean translation RMSE 0.0070 / 0.0075 / 0.0088 ->
+  // 0.0034 / 0.0023 / 0.0041; held-out calibration set objects net+refine 851 -> 860 of 1,008
+  // within (1 deg, 1%): refinement-notes.md, *The extent slide*. Proto
+  // RegisterOptions.extent_slide, CLI
   // --extent_slide.
   bool search_extent_slide = true;
   // net+refine on scene-scale trees whose answer (valid, or invalid only for degenerate
