@@ -166,18 +166,18 @@ struct RegistrationOptions {
   // RegisterOptions.weak_direction_finest_round, CLI --weak_direction_finest_round.
   bool weak_direction_finest_round = false;
   // net+refine on object-scale trees without near-symmetries or a round axis, after the starts
-  // above, whatever the confidence (laptops slid along their hinge read 0.38-0.90): the answer
+  // above, answers below 0.95 confident (laptops slid along their hinge read 0.38-0.90; a right
+  // answer on a real hand at 0.985 was moved off by its fingertips' ends): the answer
   // moved along its weakest direction until the two clouds' outermost nodes at the finest depth
   // agree, when both ends ask for the same step (core/refine/extent_slide.h), measured there
-  // without refining (a refinement from it, even at the finest depth alone, leaves it where the
-  // answer was: the cost is flat along that direction) and kept when valid and fitting within
-  // 0.05 of the answer. Unseen study (21 settings x 100 pairs), seeds 1 / 2 / 3: mean recall at
-  // (1 deg, 0.01) 0.8567 / 0.8648 / 0.8657 -> 0.8690 / 0.8729 / 0.8814 (84 answers won, 8 lost,
-  // under noise, outliers, crops and jitter), clean translation RMSE 0.0070 / 0.0075 / 0.0088 ->
-  // 0.0034 / 0.0023 / 0.0041; held-out calibration set objects net+refine 851 -> 860 of 1,008
-  // within (1 deg, 1%): refinement-notes.md, *The extent slide*. Proto
-  // RegisterOptions.extent_slide, CLI
-  // --extent_slide.
+  // without refining (the cost is flat along that direction: refined at the finest depth alone
+  // from the moved pose, the laptops looked at stayed there) and kept when valid and fitting
+  // within 0.05 of the answer. Unseen study (21 settings x 100 pairs), seeds 1 / 2 / 3: mean
+  // recall at (1 deg, 0.01) 0.8567 / 0.8648 / 0.8657 -> 0.8695 / 0.8729 / 0.8814 (84 answers
+  // won, 7 lost, under noise, outliers, crops and jitter), clean translation RMSE 0.0070 / 0.0075
+  // / 0.0088 -> 0.0034 / 0.0023 / 0.0041; held-out calibration set objects net+refine 851 -> 862
+  // of 1,008 within (1 deg, 1%): refinement-notes.md, *The extent slide*. Proto
+  // RegisterOptions.extent_slide, CLI --extent_slide.
   bool search_extent_slide = true;
   // net+refine on scene-scale trees whose answer (valid, or invalid only for degenerate
   // geometry) puts the two sensors within a search cell of each other (|t| under 3.75 m on a
