@@ -51,35 +51,22 @@ TEST(ExtentAlongTest, ReachesTheOutermostPointsOfSinglePointNodes) {
 // --count 100 --seed 3`), a laptop whose net+refine answer slid 0.047 along its hinge before the
 // extent slide. The answer here: the pair refined from the truth, its pose replaced as each test
 // needs (the information, and so the weakest direction, stays the refined one's).
-struct Laptop {
-  ObjectPair pair;
-  Octree source;
-  Octree target;
-  TreeRefinementResult answer;
-};
+using Laptop = testing_util::StudyPairAtTruth;
 
 Laptop MakeLaptop() {
-  PairOptions options;
-  options.split = ObjectSplit::kM2Unseen;
-  auto pair = MakeObjectPair(options, DeriveSeed(3, 74));
-  EXPECT_TRUE(pair.ok()) << pair.status();
-  EXPECT_EQ(ShapeFamilies()[static_cast<size_t>(pair->family_index)].name, "laptop");
-  Laptop laptop{
-      *pair, RefinementTree(pair->source, kDepth), RefinementTree(pair->target, kDepth), {}};
-  auto refined = RefineOnTrees(laptop.source, laptop.target, pair->T_target_source);
-  EXPECT_TRUE(refined.ok()) << refined.status();
-  laptop.answer = *std::move(refined);
+  Laptop laptop = testing_util::CleanStudyPairAtTruth(3, 74, kDepth);
+  EXPECT_EQ(ShapeFamilies()[static_cast<size_t>(laptop.pair.family_index)].name, "laptop");
   return laptop;
 }
 
 TEST(ExtentSlideTest, BringsALaptopSlidAlongItsHingeBack) {
   Laptop laptop = MakeLaptop();
-  ASSERT_TRUE(laptop.answer.valid) << laptop.answer.failure_reason;
+  ASSERT_TRUE(laptop.at_truth.valid) << laptop.at_truth.failure_reason;
   const double edge = CellEdge(laptop.target, kDepth);
-  laptop.answer.T_target_source = laptop.pair.T_target_source;
+  laptop.at_truth.T_target_source = laptop.pair.T_target_source;
   for (double cells : {1.5, -1.2, 2.5}) {
-    TreeRefinementResult slid = laptop.answer;
-    slid.T_target_source = StepAlongWeakestDirection(laptop.answer, cells * edge);
+    TreeRefinementResult slid = laptop.at_truth;
+    slid.T_target_source = StepAlongWeakestDirection(laptop.at_truth, cells * edge);
     const double before = ErrorOf(slid.T_target_source, laptop.pair.T_target_source).translation;
     ASSERT_GT(before, edge) << cells;
     const std::optional<ExtentSlide> back =
@@ -97,16 +84,16 @@ TEST(ExtentSlideTest, BringsALaptopSlidAlongItsHingeBack) {
 
 TEST(ExtentSlideTest, LeavesTheTruePoseAlone) {
   Laptop laptop = MakeLaptop();
-  laptop.answer.T_target_source = laptop.pair.T_target_source;
-  EXPECT_FALSE(SlideToMatchExtents(laptop.source, laptop.target, laptop.answer, kDepth));
+  laptop.at_truth.T_target_source = laptop.pair.T_target_source;
+  EXPECT_FALSE(SlideToMatchExtents(laptop.source, laptop.target, laptop.at_truth, kDepth));
 }
 
 TEST(ExtentSlideTest, ASourceCroppedAtOneEndMakesTheEndsDisagree) {
   Laptop laptop = MakeLaptop();
   const double edge = CellEdge(laptop.target, kDepth);
-  laptop.answer.T_target_source = laptop.pair.T_target_source;
-  TreeRefinementResult slid = laptop.answer;
-  slid.T_target_source = StepAlongWeakestDirection(laptop.answer, 1.5 * edge);
+  laptop.at_truth.T_target_source = laptop.pair.T_target_source;
+  TreeRefinementResult slid = laptop.at_truth;
+  slid.T_target_source = StepAlongWeakestDirection(laptop.at_truth, 1.5 * edge);
   ASSERT_TRUE(SlideToMatchExtents(laptop.source, laptop.target, slid, kDepth).has_value());
   // The line the extents are read along, in the source's frame, and the source cut 0.15 short of
   // its far end along it.

@@ -15,6 +15,7 @@
 #include "core/data/registration_metrics.h"
 #include "core/refine/tree_refinement.h"
 #include "core/synth/lidar_sequence.h"
+#include "core/synth/seeded_random.h"
 #include "core/tree/bh_tree.h"
 #include "gtest/gtest.h"
 #include "tests/core/refine/refinement_test_geometry.h"
@@ -38,6 +39,27 @@ inline Octree RefinementTree(const PointCloud& cloud, int max_depth) {
   auto tree = BuildOctree(cloud, options);
   EXPECT_TRUE(tree.ok()) << tree.status();
   return *std::move(tree);
+}
+
+// Pair i of the unseen study's clean pairs (`rpsr eval --protocol objects --split unseen --seed
+// S`), its trees to `depth`, and the pair refined from its true pose.
+struct StudyPairAtTruth {
+  ObjectPair pair;
+  Octree source;
+  Octree target;
+  TreeRefinementResult at_truth;
+};
+inline StudyPairAtTruth CleanStudyPairAtTruth(uint64_t seed, uint64_t i, int depth) {
+  PairOptions options;
+  options.split = ObjectSplit::kM2Unseen;
+  auto pair = MakeObjectPair(options, DeriveSeed(seed, i));
+  EXPECT_TRUE(pair.ok()) << pair.status();
+  StudyPairAtTruth out{
+      *pair, RefinementTree(pair->source, depth), RefinementTree(pair->target, depth), {}};
+  auto refined = RefineOnTrees(out.source, out.target, pair->T_target_source);
+  EXPECT_TRUE(refined.ok()) << refined.status();
+  out.at_truth = *std::move(refined);
+  return out;
 }
 
 // Two frames of a simulated sequence as refinement trees of depth 9 (the CLI's depth for scenes)

@@ -49,25 +49,9 @@ Eigen::Matrix<double, 6, 6> ScaledInformation(const TreeRefinementResult& r) {
 
 // The unseen study's clean pair 48 (`rpsr eval --protocol objects --split unseen --count 100
 // --seed 1`), a helix spring whose net+refine answer ended 7.2 degrees off along its screw.
-struct Spring {
-  ObjectPair pair;
-  Octree source;
-  Octree target;
-  TreeRefinementResult at_truth;  // refined from the truth
-};
+using Spring = testing_util::StudyPairAtTruth;
 
-Spring MakeSpring() {
-  PairOptions options;
-  options.split = ObjectSplit::kM2Unseen;
-  auto pair = MakeObjectPair(options, DeriveSeed(1, 48));
-  EXPECT_TRUE(pair.ok()) << pair.status();
-  Spring spring{
-      *pair, RefinementTree(pair->source, kDepth), RefinementTree(pair->target, kDepth), {}};
-  auto refined = RefineOnTrees(spring.source, spring.target, pair->T_target_source);
-  EXPECT_TRUE(refined.ok()) << refined.status();
-  spring.at_truth = *std::move(refined);
-  return spring;
-}
+Spring MakeSpring() { return testing_util::CleanStudyPairAtTruth(1, 48, kDepth); }
 
 TEST(WeakDirectionStartTest, TheStepMovesAlongTheLeastConstrainedDirectionByItsLength) {
   const Spring spring = MakeSpring();
