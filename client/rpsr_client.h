@@ -171,6 +171,10 @@ struct RegisterOptions {
   // Move the answer along its least constrained direction until the clouds' ends agree, when both
   // ends agree on the move (proto RegisterOptions.extent_slide).
   bool extent_slide = true;
+  // Move the answer along its least constrained direction to where the points that motion moves
+  // across their surface meet the other cloud best, when that direction is still constrained
+  // (proto RegisterOptions.weak_direction_chamfer).
+  bool weak_direction_chamfer = true;
   // Check a scene-scale answer that puts the two sensors together against a search over the
   // structure off the ground (proto RegisterOptions.sensor_aligned_check); in mode refine a
   // losing answer is kept but doubted (confidence capped, failure_reason naming the other pose).
@@ -241,8 +245,8 @@ struct RegistrationResult {
   std::string mode;
   // Where the returned pose's refinement started ("network", "network_later_passes", "initial",
   // "searched", "searched_turns", "structure", "round_axis", "weak_direction", "centroid",
-  // "principal_axes", "extent_slide", "symmetric") and how many starts the server refined or
-  // measured for this pair (proto RegistrationResult.start, .starts).
+  // "principal_axes", "extent_slide", "weak_direction_chamfer", "symmetric") and how many starts
+  // the server refined or measured for this pair (proto RegistrationResult.start, .starts).
   std::string start;
   int starts = 0;
   ServerTimings timings;

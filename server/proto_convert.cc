@@ -110,6 +110,9 @@ absl::StatusOr<core::RegistrationOptions> OptionsFromProto(const v1::RegisterOpt
     options.search_principal_axes_start = proto.principal_axes_start();
   }
   if (proto.has_extent_slide()) options.search_extent_slide = proto.extent_slide();
+  if (proto.has_weak_direction_chamfer()) {
+    options.search_weak_direction_chamfer = proto.weak_direction_chamfer();
+  }
   if (proto.has_weak_direction_finest_round()) {
     options.weak_direction_finest_round = proto.weak_direction_finest_round();
   }

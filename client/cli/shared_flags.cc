@@ -83,6 +83,12 @@ ABSL_FLAG(bool, extent_slide, true,
           "near-symmetries: move the answer along its least constrained direction until the "
           "clouds' outermost nodes agree at both ends (a laptop slid along its hinge), and keep "
           "it when it fits as well");
+ABSL_FLAG(bool, weak_direction_chamfer, true,
+          "eval, register, odometry, bench, net+refine on object-scale trees without "
+          "near-symmetries: when the answer is below 0.95 confident, overlaps almost wholly and "
+          "its least constrained direction is still constrained, move it along that direction to "
+          "where the nodes the motion moves across their surface meet the other cloud best (a "
+          "spring turned along its screw), and keep it when it fits as well");
 ABSL_FLAG(bool, weak_direction_finest_round, false,
           "with --weak_direction_start, when its step kept nothing and the answer is clean and "
           "whole: the same step once more at the finest depth (a little more accurate on clean "
@@ -152,6 +158,7 @@ void ApplyRegistrationFlags(core::RegistrationOptions& options) {
   options.search_centroid_start = absl::GetFlag(FLAGS_centroid_start);
   options.search_principal_axes_start = absl::GetFlag(FLAGS_principal_axes_start);
   options.search_extent_slide = absl::GetFlag(FLAGS_extent_slide);
+  options.search_weak_direction_chamfer = absl::GetFlag(FLAGS_weak_direction_chamfer);
   options.check_sensor_aligned_answers = absl::GetFlag(FLAGS_sensor_aligned_check);
   options.refinement.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
   options.refinement.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);

@@ -200,6 +200,27 @@ double MeanNodeDistanceCells(const Octree& source, const Octree& target,
   return sum / static_cast<double>(nodes) / edge;
 }
 
+std::vector<double> WeightedMeanNodeDistanceCells(const Octree& source, const Octree& target,
+                                                  const std::vector<Eigen::Isometry3d>& poses,
+                                                  int depth, const std::vector<double>& weights) {
+  std::vector<double> means(poses.size(), -1.0);
+  if (depth < 1 || depth > source.max_depth() || weights.size() != source.level(depth).size()) {
+    return means;
+  }
+  std::vector<double> sum(poses.size(), 0.0);
+  std::vector<double> weight(poses.size(), 0.0);
+  const double edge = VisitNodeDistances(source, target, poses, depth, NodeClosenessOptions{},
+                                         [&](size_t pose, size_t node, double distance) {
+                                           sum[pose] += weights[node] * distance;
+                                           weight[pose] += weights[node];
+                                         });
+  if (!(edge > 0.0)) return means;
+  for (size_t pose = 0; pose < poses.size(); ++pose) {
+    if (weight[pose] > 0.0) means[pose] = sum[pose] / weight[pose] / edge;
+  }
+  return means;
+}
+
 std::vector<double> FarNodeFractions(const Octree& source, const Octree& target,
                                      const std::vector<Eigen::Isometry3d>& poses, int depth,
                                      double far_cells, const NodeClosenessOptions& options) {

@@ -50,6 +50,14 @@ double MeanNodeDistanceCells(const Octree& source, const Octree& target,
                              const Eigen::Isometry3d& T_target_source, int depth,
                              const NodeClosenessOptions& options = {});
 
+// Per pose (the target's lookup built once for all): MeanNodeDistanceCells with each sampled
+// source node counted by weights[node] (sized as the level of `depth`). Negative where it cannot be
+// measured (as MeanNodeDistanceCells), where the weights have the wrong size, or where the
+// sampled nodes' weights add up to nothing.
+std::vector<double> WeightedMeanNodeDistanceCells(const Octree& source, const Octree& target,
+                                                  const std::vector<Eigen::Isometry3d>& poses,
+                                                  int depth, const std::vector<double>& weights);
+
 // Per pose (the target's lookup built once for all): the fraction of the same sampled source
 // nodes farther than `far_cells` (below kCapCells) from every target CoM of `depth`, the nodes the
 // pose leaves without any partner nearby. A near-twin of the answer (a gear turned by a tooth)

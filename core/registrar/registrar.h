@@ -179,6 +179,15 @@ struct RegistrationOptions {
   // of 1,008 within (1 deg, 1%): refinement-notes.md, *The extent slide*. Proto
   // RegisterOptions.extent_slide, CLI --extent_slide.
   bool search_extent_slide = true;
+  // net+refine on object-scale trees without near-symmetries or a round axis, valid answers below
+  // 0.95 confidence that overlap almost wholly (fitness 0.98 or more) and whose weakest direction
+  // is still constrained (normalised eigenvalue 0.1 or more; core/refine/weak_direction_chamfer.h):
+  // the answer moved along that direction to where the nodes the motion moves across their
+  // surface meet the other cloud best (a spring turned along its screw, whose legs and wire ends
+  // pin it), measured there without refining and kept when valid and fitting within 0.05 of the
+  // answer; its confidence is at most the answer's. Unseen study seeds 1 / 2 / 3: see
+  // refinement-notes.md, *The weak-direction chamfer*. CLI --weak_direction_chamfer.
+  bool search_weak_direction_chamfer = true;
   // net+refine on scene-scale trees whose answer (valid, or invalid only for degenerate
   // geometry) puts the two sensors within a search cell of each other (|t| under 3.75 m on a
   // 240 m LiDAR cube) and whose clouds both have a dominant plane (a ground,
@@ -279,11 +288,12 @@ struct RegistrationResult {
   // search_weak_direction_start), "centroid" (a further one there, search_centroid_start),
   // "principal_axes" (a further one on object-scale trees, search_principal_axes_start),
   // "extent_slide" (the answer moved until the clouds' ends agree and measured there,
-  // search_extent_slide) or "symmetric" (its third on those with, try_symmetric_starts);
-  // and how many starts were refined or measured for this pair (1-6 on scene-scale trees, 1-9 on
-  // object-scale ones, 10 with weak_direction_finest_round; in mode refine 1, or 2 when the
-  // sensor-aligned check refined another start to doubt the answer; 0 when the pipeline stopped
-  // before refining: the network's output not finite).
+  // search_extent_slide), "weak_direction_chamfer" (search_weak_direction_chamfer) or "symmetric"
+  // (its third on those with, try_symmetric_starts); and how many starts were refined or measured
+  // for this pair (1-6 on scene-scale trees, 1-9 on object-scale ones, 10 with
+  // weak_direction_finest_round; in mode refine 1, or 2 when the sensor-aligned check refined
+  // another start to doubt the answer; 0 when the pipeline stopped before refining: the network's
+  // output not finite).
   std::string start = "network";
   int starts = 0;
   RegistrationTimings timings;

@@ -244,6 +244,17 @@ TEST(ProtoConvertTest, ExtentSlideIsOnUnlessTurnedOff) {
   EXPECT_FALSE(options->search_extent_slide);
 }
 
+TEST(ProtoConvertTest, WeakDirectionChamferIsOnUnlessTurnedOff) {
+  auto options = OptionsFromProto({});
+  ASSERT_TRUE(options.ok());
+  EXPECT_TRUE(options->search_weak_direction_chamfer);
+  v1::RegisterOptions proto;
+  proto.set_weak_direction_chamfer(false);
+  options = OptionsFromProto(proto);
+  ASSERT_TRUE(options.ok());
+  EXPECT_FALSE(options->search_weak_direction_chamfer);
+}
+
 TEST(ProtoConvertTest, WeakDirectionFinestRoundIsOffUnlessTurnedOn) {
   auto options = OptionsFromProto({});
   ASSERT_TRUE(options.ok());
