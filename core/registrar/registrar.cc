@@ -3,8 +3,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 #include <filesystem>
 #include <map>
 #include <optional>
@@ -12,7 +10,6 @@
 #include <utility>
 #include <vector>
 
-#include "Eigen/Eigenvalues"
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -595,6 +592,25 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
     best_closeness.reset();
     return true;
   };
+  // A move of the answer that is measured there, not refined (the extent slide, the
+  // weak-direction chamfer: the stages would carry it back to their own minimum), kept when valid
+  // and fitting within kTwinFitnessSlack of the answer (by fitness the two are alike). With
+  // `cap_confidence`, the kept answer reads at most the answer's confidence.
+  auto try_measured_move = [&](const Eigen::Isometry3d& moved, const char* name,
+                               bool cap_confidence) {
+    TreeRefinementOptions measure = refinement;
+    measure.evaluate_only = true;
+    absl::StatusOr<TreeRefinementResult> r =
+        RefineWithFallback(source, target, moved, measure, cache);
+    ++result.starts;
+    if (!r.ok() || !r->valid || !(r->fitness >= best.fitness - kTwinFitnessSlack)) return;
+    const double before = result.confidence;
+    settle(*r, moved, result);
+    if (cap_confidence) result.confidence = std::min(result.confidence, before);
+    result.start = name;
+    best = *std::move(r);
+    best_closeness.reset();
+  };
   const bool net_refine = options.mode == RegistrationMode::kNetRefine;
   // The network's deferred passes (RegistrationOptions::later_passes_only_when_unconfident): run
   // from the first pass's estimate only when its answer is not confident, their estimate refined
@@ -805,19 +821,7 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
       !revolution.has_value() && !IsDeepPair(source, target, refinement)) {
     if (std::optional<WeakChamferMove> moved =
             ChamferAlongWeakestDirection(source, target, best, finest_depth)) {
-      TreeRefinementOptions measure = refinement;
-      measure.evaluate_only = true;
-      absl::StatusOr<TreeRefinementResult> r =
-          RefineWithFallback(source, target, moved->T_target_source, measure, cache);
-      ++result.starts;
-      if (r.ok() && r->valid && r->fitness >= best.fitness - kTwinFitnessSlack) {
-        const double before = result.confidence;
-        settle(*r, moved->T_target_source, result);
-        result.confidence = std::min(result.confidence, before);
-        result.start = "weak_direction_chamfer";
-        best = *std::move(r);
-        best_closeness.reset();
-      }
+      try_measured_move(moved->T_target_source, "weak_direction_chamfer", /*cap_confidence=*/true);
     }
   }
   // The extent slide (RegistrationOptions::search_extent_slide): object-scale trees without
@@ -827,117 +831,11 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   // finest depth alone from the moved pose, the laptops looked at stayed where it put them), and
   // the stages above would carry it back to where their coarse cells' minimum lies. Kept when valid
   // and fitting within kTwinFitnessSlack of the answer: by fitness the two are alike.
-  if (getenv("RPSR_CHAMF") != nullptr && net_refine && best.valid && symmetries.empty() &&
-      !revolution.has_value() && !IsDeepPair(source, target, refinement) &&
-      result.confidence < 0.95 && best.fitness >= 0.98) {
-    const double min_drop = atof(getenv("RPSR_CHAMF"));
-    const double min_eig = getenv("RPSR_CHAMF_EIG") ? atof(getenv("RPSR_CHAMF_EIG")) : 0.0;
-    const double edge = CellEdge(target, finest_depth);
-    const int fd = finest_depth;
-    Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> es(InformationInMetres(best));
-    const double eig0 = es.eigenvalues()[0] / es.eigenvalues()[5];
-    auto weights = [&](const Octree& tree, const Eigen::Isometry3d& T,
-                       const Eigen::Isometry3d& T2) {
-      const Octree::Level& l = tree.level(fd);
-      std::vector<double> w(l.size());
-      for (size_t i = 0; i < l.size(); ++i) {
-        int node = tree.level(fd).parent[static_cast<int>(i)], d = fd - 1;
-        while (d > 0 && tree.level(d).count[node] < 3) {
-          node = tree.level(d).parent[node];
-          --d;
-        }
-        Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> e3(tree.Covariance(d, node).cast<double>());
-        const Eigen::Vector3d x = l.center_of_mass[i].cast<double>();
-        Eigen::Vector3d v = (T2 * x - T * x);
-        if (!(v.norm() > 0)) {
-          w[i] = 0;
-          continue;
-        }
-        v = T.linear().transpose() * v.normalized();
-        const Eigen::Vector3d ev = e3.eigenvalues();
-        if (ev[1] < 0.05 * ev[2]) {
-          const double c = e3.eigenvectors().col(2).dot(v);
-          w[i] = 1 - c * c;
-        } else {
-          const double c = e3.eigenvectors().col(0).dot(v);
-          w[i] = c * c;
-        }
-      }
-      return w;
-    };
-    const Eigen::Isometry3d probe = StepAlongWeakestDirection(best, 0.01);
-    if (eig0 >= min_eig && !probe.isApprox(best.T_target_source, 0.0)) {
-      const std::vector<double> ws = weights(source, best.T_target_source, probe);
-      const std::vector<double> wt =
-          weights(target, Eigen::Isometry3d::Identity(), best.T_target_source * probe.inverse());
-      auto chamfer = [&](const Eigen::Isometry3d& pose) {
-        const Octree::Level& sl = source.level(fd);
-        const Octree::Level& tl = target.level(fd);
-        std::vector<Eigen::Vector3d> sp(sl.size());
-        for (size_t i = 0; i < sl.size(); ++i) sp[i] = pose * sl.center_of_mass[i].cast<double>();
-        double a = 0, aw = 0, b = 0, bw = 0;
-        for (size_t i = 0; i < sl.size(); ++i) {
-          double m2 = 1e30;
-          for (size_t j2 = 0; j2 < tl.size(); ++j2)
-            m2 = std::min(m2, (tl.center_of_mass[j2].cast<double>() - sp[i]).squaredNorm());
-          a += ws[i] * std::min(std::sqrt(m2) / edge, 3.0);
-          aw += ws[i];
-        }
-        for (size_t j2 = 0; j2 < tl.size(); ++j2) {
-          double m2 = 1e30;
-          const Eigen::Vector3d y = tl.center_of_mass[j2].cast<double>();
-          for (size_t i = 0; i < sl.size(); ++i) m2 = std::min(m2, (sp[i] - y).squaredNorm());
-          b += wt[j2] * std::min(std::sqrt(m2) / edge, 3.0);
-          bw += wt[j2];
-        }
-        return 0.5 * (a / std::max(aw, 1e-12) + b / std::max(bw, 1e-12));
-      };
-      std::vector<std::pair<double, double>> prof;
-      for (double c = -3; c <= 3.001; c += 0.25)
-        prof.push_back({c, chamfer(StepAlongWeakestDirection(best, c * edge))});
-      size_t bi = 0;
-      for (size_t k = 0; k < prof.size(); ++k)
-        if (prof[k].second < prof[bi].second) bi = k;
-      double bc = prof[bi].first;
-      if (bi > 0 && bi + 1 < prof.size()) {
-        const double a = prof[bi - 1].second, b = prof[bi].second, c = prof[bi + 1].second;
-        if (a - 2 * b + c > 0) bc += 0.5 * 0.25 * (a - c) / (a - 2 * b + c);
-      }
-      const double drop = 1.0 - prof[bi].second / prof[12].second;
-      if (getenv("RPSR_DBG"))
-        fprintf(stderr, "CHAMF eig0 %.3f min %.2f drop %.4f conf %.3f\n", eig0, bc, drop,
-                result.confidence);
-      if (drop >= min_drop && std::abs(bc) >= 0.5) {
-        const Eigen::Isometry3d moved = StepAlongWeakestDirection(best, bc * edge);
-        TreeRefinementOptions measure = refinement;
-        measure.evaluate_only = true;
-        absl::StatusOr<TreeRefinementResult> r =
-            RefineWithFallback(source, target, moved, measure, cache);
-        ++result.starts;
-        if (r.ok() && r->valid && r->fitness >= best.fitness - kTwinFitnessSlack) {
-          settle(*r, moved, result);
-          result.start = "chamfer_line";
-          best = *std::move(r);
-          best_closeness.reset();
-        }
-      }
-    }
-  }
   if (net_refine && options.search_extent_slide && best.valid &&
       result.confidence < kExtentSlideMaxAnswerConfidence && symmetries.empty() &&
       !revolution.has_value() && !IsDeepPair(source, target, refinement)) {
     if (std::optional<ExtentSlide> slid = SlideToMatchExtents(source, target, best, finest_depth)) {
-      TreeRefinementOptions measure = refinement;
-      measure.evaluate_only = true;
-      absl::StatusOr<TreeRefinementResult> r =
-          RefineWithFallback(source, target, slid->T_target_source, measure, cache);
-      ++result.starts;
-      if (r.ok() && r->valid && r->fitness >= best.fitness - kTwinFitnessSlack) {
-        settle(*r, slid->T_target_source, result);
-        result.start = "extent_slide";
-        best = *std::move(r);
-        best_closeness.reset();
-      }
+      try_measured_move(slid->T_target_source, "extent_slide", /*cap_confidence=*/false);
     }
   }
   // The symmetric start (RegistrationOptions::try_symmetric_starts): object-scale trees whose

@@ -5,6 +5,7 @@
 #define RPSR_TESTS_CORE_REGISTRAR_REGISTRAR_TEST_UTIL_H_
 
 #include <random>
+#include <string>
 
 #include "core/data/object_pairs.h"
 #include "core/data/registration_metrics.h"
@@ -78,6 +79,44 @@ inline absl::StatusOr<AnswersWithAndWithout> RegisterStudyPair(
   answers.error_without = ErrorOf(answers.without.T_target_source, pair->T_target_source);
   answers.error_with = ErrorOf(answers.with.T_target_source, pair->T_target_source);
   return answers;
+}
+
+// Pair i of `rpsr eval --protocol objects --split unseen --seed S` (clean), with the registrar's
+// `option` off and on (everything else default).
+inline AnswersWithAndWithout RegisterStudyPairWithSwitch(uint64_t seed, uint64_t i,
+                                                         bool RegistrationOptions::*option) {
+  RegistrationOptions without;
+  without.*option = false;
+  RegistrationOptions with;
+  with.*option = true;
+  absl::StatusOr<AnswersWithAndWithout> answers = RegisterStudyPair(seed, i, without, with);
+  EXPECT_TRUE(answers.ok()) << answers.status();
+  return answers.ok() ? *std::move(answers) : AnswersWithAndWithout{};
+}
+
+// A step that moves answers (`option`, naming its kept answers `start`) over seed S's clean study
+// pairs 0 .. count - 1: every answer within (1 deg, 0.01) without it stays within it, and where the
+// step keeps nothing, the answer and its confidence are the very ones without it. Returns how many
+// answers the step kept.
+inline int ExpectAnswersKeptWhereTheStepKeepsNothing(uint64_t seed, uint64_t count,
+                                                     bool RegistrationOptions::*option,
+                                                     const std::string& start) {
+  int kept = 0;
+  for (uint64_t i = 0; i < count; ++i) {
+    const AnswersWithAndWithout answers = RegisterStudyPairWithSwitch(seed, i, option);
+    if (answers.error_without.rotation_deg <= 1.0 && answers.error_without.translation <= 0.01) {
+      EXPECT_LE(answers.error_with.rotation_deg, 1.0) << "pair " << i;
+      EXPECT_LE(answers.error_with.translation, 0.01) << "pair " << i;
+    }
+    if (answers.with.start == start) {
+      ++kept;
+      continue;
+    }
+    EXPECT_TRUE(answers.with.T_target_source.isApprox(answers.without.T_target_source, 0.0))
+        << "pair " << i;
+    EXPECT_EQ(answers.with.confidence, answers.without.confidence) << "pair " << i;
+  }
+  return kept;
 }
 
 }  // namespace rpsr::core::testing_util

@@ -20,14 +20,8 @@ using testing_util::AnswersWithAndWithout;
 // Pair i of `rpsr eval --protocol objects --split unseen --seed S` (clean), without the chamfer
 // and with it.
 AnswersWithAndWithout RegisterWithAndWithout(uint64_t seed, uint64_t i) {
-  RegistrationOptions without;
-  without.search_weak_direction_chamfer = false;
-  RegistrationOptions with;
-  with.search_weak_direction_chamfer = true;
-  absl::StatusOr<AnswersWithAndWithout> answers =
-      testing_util::RegisterStudyPair(seed, i, without, with);
-  EXPECT_TRUE(answers.ok()) << answers.status();
-  return answers.ok() ? *std::move(answers) : AnswersWithAndWithout{};
+  return testing_util::RegisterStudyPairWithSwitch(
+      seed, i, &RegistrationOptions::search_weak_direction_chamfer);
 }
 
 TEST(RegistrarWeakDirectionChamferTest, BringsSpringsTurnedAlongTheirScrewBack) {
@@ -55,21 +49,8 @@ TEST(RegistrarWeakDirectionChamferTest, BringsSpringsTurnedAlongTheirScrewBack) 
 // Seed 1's clean pairs 0-39: every answer within (1 deg, 0.01) without the chamfer stays within
 // it; where the chamfer keeps nothing, the answer and its confidence are the very ones without it.
 TEST(RegistrarWeakDirectionChamferTest, AnswersAreKeptWhereTheChamferKeepsNothing) {
-  int kept = 0;
-  for (uint64_t i = 0; i < 40; ++i) {
-    const AnswersWithAndWithout answers = RegisterWithAndWithout(1, i);
-    if (answers.error_without.rotation_deg <= 1.0 && answers.error_without.translation <= 0.01) {
-      EXPECT_LE(answers.error_with.rotation_deg, 1.0) << "pair " << i;
-      EXPECT_LE(answers.error_with.translation, 0.01) << "pair " << i;
-    }
-    if (answers.with.start == "weak_direction_chamfer") {
-      ++kept;
-      continue;
-    }
-    EXPECT_TRUE(answers.with.T_target_source.isApprox(answers.without.T_target_source, 0.0))
-        << "pair " << i;
-    EXPECT_EQ(answers.with.confidence, answers.without.confidence) << "pair " << i;
-  }
+  const int kept = testing_util::ExpectAnswersKeptWhereTheStepKeepsNothing(
+      1, 40, &RegistrationOptions::search_weak_direction_chamfer, "weak_direction_chamfer");
   std::printf("the chamfer kept %d of 40 answers\n", kept);
   EXPECT_LT(kept, 5);
 }
