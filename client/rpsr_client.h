@@ -175,6 +175,10 @@ struct RegisterOptions {
   // across their surface meet the other cloud best, when that direction is still constrained
   // (proto RegisterOptions.weak_direction_chamfer).
   bool weak_direction_chamfer = true;
+  // Refine the answer turned by a half turn about a principal axis of a target that nearly maps
+  // onto itself under it (a guitar flipped front to back), kept when it fits clearly better
+  // (proto RegisterOptions.half_turn_start).
+  bool half_turn_start = true;
   // Check a scene-scale answer that puts the two sensors together against a search over the
   // structure off the ground (proto RegisterOptions.sensor_aligned_check); in mode refine a
   // losing answer is kept but doubted (confidence capped, failure_reason naming the other pose).
@@ -245,7 +249,8 @@ struct RegistrationResult {
   std::string mode;
   // Where the returned pose's refinement started ("network", "network_later_passes", "initial",
   // "searched", "searched_turns", "structure", "round_axis", "weak_direction", "centroid",
-  // "principal_axes", "extent_slide", "weak_direction_chamfer", "symmetric") and how many starts
+  // "principal_axes", "extent_slide", "weak_direction_chamfer", "half_turn", "symmetric") and how
+  // many starts
   // the server refined or measured for this pair (proto RegistrationResult.start, .starts).
   std::string start;
   int starts = 0;

@@ -113,6 +113,7 @@ absl::StatusOr<core::RegistrationOptions> OptionsFromProto(const v1::RegisterOpt
   if (proto.has_weak_direction_chamfer()) {
     options.search_weak_direction_chamfer = proto.weak_direction_chamfer();
   }
+  if (proto.has_half_turn_start()) options.search_half_turn_start = proto.half_turn_start();
   if (proto.has_weak_direction_finest_round()) {
     options.weak_direction_finest_round = proto.weak_direction_finest_round();
   }

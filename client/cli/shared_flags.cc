@@ -89,6 +89,11 @@ ABSL_FLAG(bool, weak_direction_chamfer, true,
           "its least constrained direction is still constrained, move it along that direction to "
           "where the nodes the motion moves across their surface meet the other cloud best (a "
           "spring turned along its screw), and keep it when it fits as well");
+ABSL_FLAG(bool, half_turn_start, true,
+          "eval, register, odometry, bench, net+refine on object-scale trees without "
+          "near-symmetries: where a half turn about one of the target's principal axes nearly "
+          "maps it onto itself (a guitar flipped front to back), also refine the answer turned "
+          "by it, and keep that when it fits clearly better by a wide margin");
 ABSL_FLAG(bool, weak_direction_finest_round, false,
           "with --weak_direction_start, when its step kept nothing and the answer is clean and "
           "whole: the same step once more at the finest depth (a little more accurate on clean "
@@ -159,6 +164,7 @@ void ApplyRegistrationFlags(core::RegistrationOptions& options) {
   options.search_principal_axes_start = absl::GetFlag(FLAGS_principal_axes_start);
   options.search_extent_slide = absl::GetFlag(FLAGS_extent_slide);
   options.search_weak_direction_chamfer = absl::GetFlag(FLAGS_weak_direction_chamfer);
+  options.search_half_turn_start = absl::GetFlag(FLAGS_half_turn_start);
   options.check_sensor_aligned_answers = absl::GetFlag(FLAGS_sensor_aligned_check);
   options.refinement.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
   options.refinement.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);

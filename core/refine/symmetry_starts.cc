@@ -132,6 +132,18 @@ std::vector<SelfSymmetry> TurnsAboutRoundAxes(const Octree& target, double step_
   return turns;
 }
 
+std::vector<SelfSymmetry> HalfTurnsAboutPrincipalAxes(const Octree& target,
+                                                      const SelfSymmetryOptions& options) {
+  std::vector<SelfSymmetry> turns;
+  if (target.max_depth() < 2 || target.num_points() == 0) return turns;
+  const PrincipalAxes principal = PrincipalAxesOf(target, options);
+  for (int axis = 0; axis < 3; ++axis) {
+    turns.push_back(
+        {TurnAbout(principal.centre, principal.axes.col(axis), M_PI), axis, 180.0, -1.0});
+  }
+  return turns;
+}
+
 namespace {
 
 // A line about which a body of revolution may turn: a unit axis through a point.

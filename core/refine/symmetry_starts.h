@@ -120,6 +120,14 @@ std::vector<SelfSymmetry> FindSelfSymmetries(const Octree& target,
 std::vector<SelfSymmetry> TurnsAboutRoundAxes(const Octree& target, double step_deg,
                                               const SelfSymmetryOptions& options = {});
 
+// The half turns about each of the target's three principal axes through its centre of mass, as
+// SelfSymmetry entries with self_distance_cells -1 (not checked to be near-symmetries): a guitar
+// flipped front to back fits all but its neck and bridge, and FindSelfSymmetries, which looks for
+// n-fold turns (n >= 3) about round axes, does not see such a flip
+// (RegistrationOptions::search_half_turn_start).
+std::vector<SelfSymmetry> HalfTurnsAboutPrincipalAxes(const Octree& target,
+                                                      const SelfSymmetryOptions& options = {});
+
 // A target that is a body of revolution (a vase, a round table): every turn about `axis` through
 // `centre` (target frame) maps it onto itself, so no registration can measure the turn about it,
 // however well the clouds fit; the registrar reports that turn as a degenerate direction.

@@ -227,6 +227,24 @@ constexpr double kPrincipalAxesConfidenceGain = 0.1;
 // 0.1 more.
 constexpr double kPrincipalAxesMinConfidence = 0.5;
 
+// The half-turn start (RegistrationOptions::search_half_turn_start). A half turn is tried where
+// the answer turned by it leaves at most this many more of the nodes one depth above the finest
+// without a partner within 1.9 cells (TwoWayFarNodeFractions) than the answer: a generic target's
+// half turns leave ~0.25 of them, a guitar's front-to-back flip none (its neck and bridge lie
+// within that reach of the body).
+constexpr double kHalfTurnFarMargin = 0.02;
+// The refined twin is kept when its fitness is at least this much above the answer's and at least
+// kHalfTurnMinFitness, and its finest nodes lie kHalfTurnCloserBy closer. Set on the unseen
+// study's three seeds (6,300 answers, every near-symmetric half turn refined and taken, then
+// sorted by the truth): the three right twins were guitars flipped under crops and outliers
+// (fitness +0.13 and +0.18 with nodes 13-15% closer, and one +0.00 that no margin keeps); of the
+// 457 wrong ones, those fitting better did so by 0.03 or less but two under crops (0.57 -> 0.77,
+// 18% closer; 0.71 -> 0.84, no closer). Checked after: seeds 4 and 5, 2,000 clean pairs, 1,200
+// real-mesh answers (refinement-notes.md, *The half-turn start*).
+constexpr double kHalfTurnFitnessGain = 0.05;
+constexpr double kHalfTurnMinFitness = 0.85;
+constexpr double kHalfTurnCloserBy = 0.05;
+
 // Two starts closer than this converge to the same result: 0.25 degrees, and the source's centre
 // of mass placed within 0.25% of the target cube's half-length (where it is placed, not the
 // translations: those differ with the clouds' distance from their frame's origin).
@@ -778,6 +796,42 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
       result = std::move(candidate);
       best = *std::move(r);
       best_closeness.reset();
+    }
+  }
+  // The half-turn start (RegistrationOptions::search_half_turn_start): object-scale trees without
+  // near-symmetries or a round axis, whatever the confidence, where a half turn about one of the
+  // target's principal axes maps it nearly onto itself (the answer turned by it leaves at most
+  // kHalfTurnFarMargin more nodes without a partner than the answer: a guitar flipped front to
+  // back). That twin is refined and kept only when it fits by a wide margin better, overall and
+  // node by node (kHalfTurnFitnessGain, kHalfTurnMinFitness, kHalfTurnCloserBy): under crops and
+  // outliers the wrong flip often fits a percent or two better. An answer fitting within
+  // kHalfTurnFitnessGain of all is not searched.
+  if (net_refine && options.search_half_turn_start && best.valid && symmetries.empty() &&
+      !revolution.has_value() && !IsDeepPair(source, target, refinement) &&
+      best.fitness + kHalfTurnFitnessGain <= 1.0) {
+    std::vector<Eigen::Isometry3d> poses = {best.T_target_source};
+    for (const SelfSymmetry& turn : HalfTurnsAboutPrincipalAxes(target)) {
+      poses.push_back(turn.S * best.T_target_source);
+    }
+    const std::vector<double> far = TwoWayFarNodeFractions(
+        source, target, poses, SymmetryDepth(source, target), SelfSymmetryOptions{}.far_cells);
+    for (size_t k = 1; k < poses.size(); ++k) {
+      if (!(far.front() >= 0.0 && far[k] >= 0.0 && far[k] <= far.front() + kHalfTurnFarMargin)) {
+        continue;
+      }
+      const bool kept =
+          try_start_kept_by(poses[k], "half_turn", [&](const TreeRefinementResult& r) {
+            // A twin refined back next to the answer is the answer better settled, not the other
+            // flip: what it would change is the confidence alone.
+            if (!(r.fitness >= best.fitness + kHalfTurnFitnessGain &&
+                  r.fitness >= kHalfTurnMinFitness) ||
+                NearlyEqual(r.T_target_source, best.T_target_source, source, target)) {
+              return false;
+            }
+            if (!best_closeness) best_closeness = closeness(best);
+            return closeness(r) <= (1.0 - kHalfTurnCloserBy) * *best_closeness;
+          });
+      if (kept) break;
     }
   }
   // The weak-direction start (RegistrationOptions::search_weak_direction_start), whatever the

@@ -309,6 +309,18 @@ BENCHMARK(BM_RegisterWeakDirectionChamfer)
     ->ArgsProduct({{static_cast<int>(RegistrationMode::kNetRefine)}, {0, 2}, {0, 1}})
     ->Unit(benchmark::kMillisecond);
 
+// net+refine with the half-turn start (half:1, the default: RegistrationOptions::
+// search_half_turn_start) and without (half:0), on the objects (pairs:0) and their jittered copies
+// (pairs:2): for answers fitting below 0.95, four poses' two-way far fractions, and a refinement
+// for each half turn under which the target nearly maps onto itself.
+void BM_RegisterHalfTurnStart(benchmark::State& state) {
+  RunObjectsWithSwitch(state, &RegistrationOptions::search_half_turn_start);
+}
+BENCHMARK(BM_RegisterHalfTurnStart)
+    ->ArgNames({"mode", "pairs", "half"})
+    ->ArgsProduct({{static_cast<int>(RegistrationMode::kNetRefine)}, {0, 2}, {0, 1}})
+    ->Unit(benchmark::kMillisecond);
+
 // Objects jittered by 0.08, with the noise polish (polish:1) and without (polish:0).
 void BM_RegisterJitteredObjects(benchmark::State& state) {
   RunRegister(state, JitteredObjectTrees(), false, SharedRegistrar(),

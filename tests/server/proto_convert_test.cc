@@ -255,6 +255,17 @@ TEST(ProtoConvertTest, WeakDirectionChamferIsOnUnlessTurnedOff) {
   EXPECT_FALSE(options->search_weak_direction_chamfer);
 }
 
+TEST(ProtoConvertTest, HalfTurnStartIsOnUnlessTurnedOff) {
+  auto options = OptionsFromProto({});
+  ASSERT_TRUE(options.ok());
+  EXPECT_TRUE(options->search_half_turn_start);
+  v1::RegisterOptions proto;
+  proto.set_half_turn_start(false);
+  options = OptionsFromProto(proto);
+  ASSERT_TRUE(options.ok());
+  EXPECT_FALSE(options->search_half_turn_start);
+}
+
 TEST(ProtoConvertTest, WeakDirectionFinestRoundIsOffUnlessTurnedOn) {
   auto options = OptionsFromProto({});
   ASSERT_TRUE(options.ok());

@@ -15,6 +15,7 @@
 
 #include "Eigen/Eigenvalues"
 #include "core/data/object_pairs.h"
+#include "core/refine/node_closeness.h"
 #include "core/synth/seeded_random.h"
 #include "core/synth/shape_families.h"
 #include "gtest/gtest.h"
@@ -140,6 +141,33 @@ TEST(SymmetryStartsTest, ASquatBodyOfRevolutionIsFoundAboutItsTrueAxisNotItsPrin
   }
   // The case the refinement exists for occurs among these seeds.
   EXPECT_GE(principal_off, 1);
+}
+
+// A guitar's half turns: one about each principal axis, through the centre of mass; the flip front
+// to back (about its long axis, the axis of greatest variance) leaves its nodes near its own, the
+// other two do not.
+TEST(SymmetryStartsTest, AGuitarFlippedFrontToBackNearlyMapsOntoItself) {
+  for (const ObjectPair& pair : PairsOf("guitar", 2)) {
+    const Octree target = RefinementTree(pair.target, 6);
+    const std::vector<SelfSymmetry> turns = HalfTurnsAboutPrincipalAxes(target);
+    ASSERT_EQ(turns.size(), 3u);
+    const Eigen::Vector3d centre = target.level(0).center_of_mass[0].cast<double>();
+    std::vector<Eigen::Isometry3d> poses;
+    for (size_t k = 0; k < turns.size(); ++k) {
+      EXPECT_EQ(turns[k].axis, static_cast<int>(k));
+      EXPECT_EQ(turns[k].angle_deg, 180.0);
+      EXPECT_NEAR(turns[k].S.linear().trace(), -1.0, 1e-9);  // a half turn
+      EXPECT_LT((turns[k].S * centre - centre).norm(), 1e-9);
+      poses.push_back(turns[k].S);
+    }
+    const std::vector<double> far = TwoWayFarNodeFractions(
+        target, target, poses, SymmetryDepth(target, target), SelfSymmetryOptions{}.far_cells);
+    std::printf("guitar half turns leave %.3f %.3f %.3f far\n", far[0], far[1], far[2]);
+    EXPECT_LT(far[2], 0.02);
+    EXPECT_GT(far[0], 0.1);
+    EXPECT_GT(far[1], 0.1);
+  }
+  EXPECT_TRUE(HalfTurnsAboutPrincipalAxes(Octree{}).empty());
 }
 
 TEST(SymmetryStartsTest, ATinyOrEmptyTreeHasNone) {
