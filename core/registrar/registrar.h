@@ -151,7 +151,10 @@ struct RegistrationOptions {
   // Unseen study (21 settings of 100 pairs), seeds 1 / 2 / 3: mean recall at (1 deg, 0.01) 0.8543
   // / 0.8610 / 0.8586 -> 0.8571 / 0.8643 / 0.8648, 31 answers won and 5 lost, clean rotation RMSE
   // of seed 3 1.04 -> 0.53 degrees: refinement-notes.md, *The centroid-aligned start*. Its answers
-  // are taken by the usual rule between starts (clearly better fitness, or closer nodes).
+  // are taken by the usual rule between starts (clearly better fitness, or closer nodes). A
+  // confident answer gets it too where it overlaps below 0.97 and leaves the centres more than 2
+  // cells apart, kept only when the refined start overlaps at least 0.97 and clearly better (a
+  // sofa slid along its length by 0.217 read 0.989 confident; session 41).
   bool search_centroid_start = true;
   // net+refine on object-scale trees whose answer is valid, fits under 80% of the source and is
   // still below 0.5 confident after the starts above: the source's principal frame mapped onto
