@@ -25,12 +25,14 @@ std::vector<PrincipalAxesStart> PrincipalAxesStarts(const Octree& source, const 
   // vase) does not fix its frame's signs: the flips are its near-twins, and under a crop the
   // twin that puts the centres together can fit better than the slid truth (three cropped
   // answers of seed 1's unseen study, flipped at 0.19-0.78 confidence before this check). The
-  // threshold is the near-symmetries' own (SelfSymmetryOptions::max_self_distance_cells).
-  const double max_self_cells = SelfSymmetryOptions{}.max_self_distance_cells;
+  // threshold was the near-symmetries' own (SelfSymmetryOptions::max_self_distance_cells) until
+  // session 41 raised that to 1.0 for gears' teeth, where a turn's dip tells the gear apart; a
+  // half turn has no dip to check, so this one stays at the 0.9 it was measured with.
+  constexpr double kMaxSelfCells = 0.9;
   for (int axis = 0; axis < 3; ++axis) {
     const double self = MeanNodeDistanceCells(
         target, target, TurnAbout(t.centre, t.axes.col(axis).normalized(), M_PI), depth);
-    if (self >= 0.0 && self <= max_self_cells) return starts;
+    if (self >= 0.0 && self <= kMaxSelfCells) return starts;
   }
   // Sign choices with an even number of flips: each keeps det(S) = 1, so with two rotation
   // matrices (det(axes) = -1 is fixed by flipping the least-variance axis) R is a rotation.

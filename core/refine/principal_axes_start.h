@@ -34,7 +34,8 @@ struct PrincipalAxesStart {
 // far_fraction at `depth` (nodes beyond `far_cells` of that depth), ascending. Empty when either
 // tree is empty, a cloud's points span less than a line (two variances zero: no frame), or a half
 // turn about one of the target's principal axes maps it near onto itself (its nodes at `depth`
-// within SelfSymmetryOptions::max_self_distance_cells on average: the signs are not the shape's).
+// within 0.9 cells on average, SelfSymmetryOptions::max_self_distance_cells before session 41: the
+// signs are not the shape's).
 std::vector<PrincipalAxesStart> PrincipalAxesStarts(const Octree& source, const Octree& target,
                                                     int depth, double far_cells);
 

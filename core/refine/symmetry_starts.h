@@ -33,9 +33,14 @@ namespace rpsr::core {
 struct SelfSymmetryOptions {
   // A turn is a near-symmetry when the turned target's nodes one depth above the finest lie at
   // most this far from its own on average, in cells (MeanNodeDistanceCells: 0 unturned; a gear
-  // turned by a tooth 0.77-0.88 on 1,024-point objects to depth 6, between teeth ~1.1; a generic
-  // object half turned 1.0-1.7).
-  double max_self_distance_cells = 0.9;
+  // turned by a tooth 0.77-0.91 on 1,024-point objects to depth 6, between teeth ~1.1; a generic
+  // object half turned 1.0-1.7). 0.9 until session 41, which missed clean gears whose tooth read
+  // 0.906 (half a tooth 1.115) and ended a tooth off, 22-26 degrees; the dip below is what tells a
+  // gear from a round object. At 1.0: two clean gears of 4,000 clean pairs and a real
+  // screwdriver's partial view (59 -> 0.1 degrees) came back, and no other answer of the unseen
+  // study's seeds 1-5 or 1,200 real-mesh answers changed (refinement-notes.md, *Gears whose tooth
+  // reads 0.9 (session 41)*).
+  double max_self_distance_cells = 1.0;
   // ... and the turn by half of it must leave the nodes at least this much farther (a gear turned
   // by half a tooth: 1.05-1.14 cells; a smooth round object is nearer itself at half the angle).
   // 0.15 until session 26 missed a real screwdriver's six-lobed handle (0.51 cells at 60 degrees,

@@ -63,6 +63,25 @@ TEST(SymmetryStartsTest, AGearsTeethAreTurnsAboutItsAxis) {
   }
 }
 
+// A gear whose turn by a tooth leaves its nodes 0.906 cells from its own (pair 1061 of `rpsr eval
+// --protocol objects --split unseen --count 2000 --seed 1`): found since session 41 raised
+// max_self_distance_cells to 1.0, missed at the 0.9 before it (the answer then ended a tooth off).
+TEST(SymmetryStartsTest, AGearWhoseToothReadsJustAboveNineTenthsIsFound) {
+  PairOptions options;
+  options.split = ObjectSplit::kM2Unseen;
+  absl::StatusOr<ObjectPair> pair = MakeObjectPair(options, DeriveSeed(1, 1061));
+  ASSERT_TRUE(pair.ok()) << pair.status();
+  ASSERT_EQ(ShapeFamilies()[pair->family_index].name, "gear");
+  const Octree target = RefinementTree(pair->target, 6);
+  const std::vector<SelfSymmetry> found = FindSelfSymmetries(target);
+  ASSERT_EQ(found.size(), 13u);  // 14 teeth
+  EXPECT_GT(found.front().self_distance_cells, 0.9);
+  EXPECT_LE(found.front().self_distance_cells, 1.0);
+  SelfSymmetryOptions before;
+  before.max_self_distance_cells = 0.9;
+  EXPECT_TRUE(FindSelfSymmetries(target, before).empty());
+}
+
 TEST(SymmetryStartsTest, AnObjectWithoutSymmetryHasNone) {
   for (const ObjectPair& pair : PairsOf("sofa", 3)) {
     EXPECT_TRUE(FindSelfSymmetries(RefinementTree(pair.target, 6)).empty());
