@@ -163,7 +163,8 @@ struct RegisterOptions {
   // quarter slower on objects (proto RegisterOptions.weak_direction_finest_round).
   bool weak_direction_finest_round = false;
   // Refine the answer's rotation with the clouds' centres of mass put together too, when the
-  // answer is not confident and leaves them apart (proto RegisterOptions.centroid_start).
+  // answer is not confident and leaves them apart, or is confident but overlaps below 97% and
+  // leaves them more than 2 cells apart (proto RegisterOptions.centroid_start).
   bool centroid_start = true;
   // Refine starts from the clouds' principal axes too when the answer fits poorly and is not
   // confident (proto RegisterOptions.principal_axes_start).
@@ -250,8 +251,8 @@ struct RegistrationResult {
   // Where the returned pose's refinement started ("network", "network_later_passes", "initial",
   // "searched", "searched_turns", "structure", "round_axis", "weak_direction", "centroid",
   // "principal_axes", "extent_slide", "weak_direction_chamfer", "half_turn", "symmetric") and how
-  // many starts
-  // the server refined or measured for this pair (proto RegistrationResult.start, .starts).
+  // many starts the server refined or measured for this pair (proto RegistrationResult.start,
+  // .starts).
   std::string start;
   int starts = 0;
   ServerTimings timings;

@@ -71,7 +71,8 @@ ABSL_FLAG(bool, centroid_start, true,
           "eval, register, odometry, bench, net+refine on object-scale trees: when the answer is "
           "below 0.9 confidence and leaves the clouds' centres of mass more than half a cell "
           "apart, also refine its rotation with the centres put together, and keep the clearly "
-          "better answer");
+          "better answer; a confident answer too where it overlaps below 97% and leaves them "
+          "more than 2 cells apart, kept only when the centred one overlaps at least 97%");
 ABSL_FLAG(bool, principal_axes_start, true,
           "eval, register, odometry, bench, net+refine on object-scale trees: when the answer "
           "fits under 80% of the source and reads below 0.5 confident, also refine starts that "
@@ -91,9 +92,10 @@ ABSL_FLAG(bool, weak_direction_chamfer, true,
           "spring turned along its screw), and keep it when it fits as well");
 ABSL_FLAG(bool, half_turn_start, true,
           "eval, register, odometry, bench, net+refine on object-scale trees without "
-          "near-symmetries: where a half turn about one of the target's principal axes nearly "
-          "maps it onto itself (a guitar flipped front to back), also refine the answer turned "
-          "by it, and keep that when it fits clearly better by a wide margin");
+          "near-symmetries, answers overlapping 95% or less: where a half turn about one of the "
+          "target's principal axes nearly maps it onto itself (a guitar flipped front to back), "
+          "also refine the answer turned by it, and keep that when it fits clearly better by a "
+          "wide margin");
 ABSL_FLAG(bool, weak_direction_finest_round, false,
           "with --weak_direction_start, when its step kept nothing and the answer is clean and "
           "whole: the same step once more at the finest depth (a little more accurate on clean "

@@ -118,14 +118,14 @@ struct RegistrationOptions {
   // tab) whose network start is ~20 degrees off about its body ends there: the tab's few nodes
   // give a local step nothing to climb, while the turned pose that meets them fits better.
   bool search_round_axis_start = true;
-  // net+refine on object-scale trees whose target has no near-symmetry nor a round axis, whatever
-  // the confidence, answers fitting below 0.95: the answer turned by a half turn about one of the
-  // target's principal axes (HalfTurnsAboutPrincipalAxes) where that leaves about as few nodes
-  // without a partner as the answer (the target nearly maps onto itself: a guitar flipped front
-  // to back), refined as a further start and kept only when it fits clearly better by a wide
-  // margin (fitness 0.05 more and 0.85 at least, finest nodes 5% closer). A flipped guitar fits
-  // all but its neck and bridge and read 0.985 confident 180 degrees off; under crops and
-  // outliers the wrong flip often fits a percent or two better, hence the margins
+  // net+refine on object-scale trees whose target has no near-symmetry nor is a body of
+  // revolution, whatever the confidence, answers fitting 0.95 or less: the answer turned by a half
+  // turn about one of the target's principal axes (HalfTurnsAboutPrincipalAxes) where that leaves
+  // about as few nodes without a partner as the answer (the target nearly maps onto itself: a
+  // guitar flipped front to back), refined as a further start and kept only when it fits clearly
+  // better by a wide margin (fitness 0.05 more and 0.85 at least, finest nodes 5% closer). A
+  // flipped guitar fits all but its neck and bridge and read 0.985 confident 180 degrees off; under
+  // crops and outliers the wrong flip often fits a percent or two better, hence the margins
   // (refinement-notes.md, *The half-turn start*). Proto RegisterOptions.half_turn_start, CLI
   // --half_turn_start.
   bool search_half_turn_start = true;
@@ -142,7 +142,8 @@ struct RegistrationOptions {
   // more beyond (5 deg, 0.05) 21 -> 13; objects ~1.5 ms more a pair (registrar_bench,
   // BM_RegisterWeakDirectionStart): refinement-notes.md, *Steps along the weakest direction*.
   bool search_weak_direction_start = true;
-  // net+refine on object-scale trees whose answer is not confident: when the answer leaves the
+  // net+refine on object-scale trees whose answer is not confident (or, since session 41, is but
+  // overlaps below 0.97; see the end of this comment): when the answer leaves the
   // source's centre of mass more than half a cell (one depth above the finest) from the target's,
   // the answer's rotation with the translation that puts the two centres together is refined too.
   // A whole object's two scans share their centre of mass whatever the sampling; an answer that
@@ -309,7 +310,7 @@ struct RegistrationResult {
   // search_extent_slide), "weak_direction_chamfer" (search_weak_direction_chamfer), "half_turn"
   // (search_half_turn_start) or "symmetric"
   // (its third on those with, try_symmetric_starts); and how many starts were refined or measured
-  // for this pair (1-6 on scene-scale trees, 1-12 on object-scale ones, 13 with
+  // for this pair (1-6 on scene-scale trees, 1-13 on object-scale ones, 14 with
   // weak_direction_finest_round; in mode refine 1, or 2 when the sensor-aligned check refined
   // another start to doubt the answer; 0 when the pipeline stopped before refining: the network's
   // output not finite).
