@@ -291,6 +291,23 @@ TwinsScored ScoreTwins(const Octree& source, const Octree& target, const Eigen::
 
 }  // namespace
 
+std::vector<Eigen::Isometry3d> TwinsFittingAlike(const Octree& source, const Octree& target,
+                                                 const Eigen::Isometry3d& answer,
+                                                 const std::vector<SelfSymmetry>& symmetries,
+                                                 double max_far_fraction_rise,
+                                                 const SelfSymmetryOptions& options) {
+  std::vector<Eigen::Isometry3d> twins;
+  if (symmetries.empty()) return twins;
+  const TwinsScored scored = ScoreTwins(source, target, answer, symmetries, options.far_cells);
+  if (!(scored.far.front() >= 0.0)) return twins;
+  for (size_t k = 1; k < scored.far.size(); ++k) {
+    if (scored.far[k] >= 0.0 && scored.far[k] <= scored.far.front() + max_far_fraction_rise) {
+      twins.push_back(scored.poses[k]);
+    }
+  }
+  return twins;
+}
+
 double TwoWayFarFraction(const Octree& source, const Octree& target, const Eigen::Isometry3d& T,
                          const SelfSymmetryOptions& options) {
   return TwoWayFarFractions(source, target, {T}, options.far_cells).front();

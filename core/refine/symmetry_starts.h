@@ -167,6 +167,17 @@ struct SymmetricTwin {
   double answer_far_fraction = 0.0;  // of the answer
 };
 
+// Among S * answer for the given symmetries, in their order, those whose two-way far fraction
+// (TwoWayFarFraction) is measured and at most the answer's + max_far_fraction_rise: twins that
+// fit about as well as the answer by the count of nodes without a partner (a guitar's flip front
+// to back, RegistrationOptions::search_half_turn_start). Empty where the answer's cannot be
+// measured or without symmetries.
+std::vector<Eigen::Isometry3d> TwinsFittingAlike(const Octree& source, const Octree& target,
+                                                 const Eigen::Isometry3d& answer,
+                                                 const std::vector<SelfSymmetry>& symmetries,
+                                                 double max_far_fraction_rise,
+                                                 const SelfSymmetryOptions& options = {});
+
 // Among S * answer for the given symmetries, the one with the fewest far source nodes, when
 // fewer than the answer's by min_far_fraction_drop; nullopt otherwise.
 std::optional<SymmetricTwin> BestSymmetricTwin(const Octree& source, const Octree& target,

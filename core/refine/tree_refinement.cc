@@ -62,17 +62,6 @@ struct NodeShape {
   bool planar = false;
 };
 
-// The node whose shape `node` reads: the nearest on its path to the root (itself first) holding
-// at least min_count points; {-1, -1} when none does.
-std::pair<int, int> ShapeNodeOf(const Octree& tree, int depth, int node, int min_count) {
-  while (static_cast<int>(tree.level(depth).count[node]) < min_count && depth > 0) {
-    node = tree.level(depth).parent[node];
-    --depth;
-  }
-  if (static_cast<int>(tree.level(depth).count[node]) < min_count) return {-1, -1};
-  return {depth, node};
-}
-
 // How nodes get their shapes (what a side's shapes depend on besides the tree and the depth):
 // TreeRefinementOptions::min_count_for_covariance and line_normals_from_planes.
 struct ShapeRule {
@@ -88,11 +77,9 @@ ShapeRule ShapeRuleOf(const TreeRefinementOptions& options) {
   return {options.min_count_for_covariance, options.line_normals_from_planes.value_or(false)};
 }
 
-// TreeRefinementOptions::line_normals_from_planes: a shape is a line when its middle eigenvalue is
-// under this fraction of its largest (one scan ring's arc: ~1e-3; a cell of surface holding two
-// rings already ~0.5); an ancestor lends it its normal when the line lies within 60 degrees of
+// TreeRefinementOptions::line_normals_from_planes: a shape is a line by kLineEigenvalueRatio
+// (tree_refinement.h); an ancestor lends it its normal when the line lies within 60 degrees of
 // the ancestor's plane (|normal . line| < 0.5), looking at most this many depths up.
-constexpr double kLineEigenvalueRatio = 0.05;
 constexpr double kLineInPlaneCosine = 0.5;
 constexpr int kLineAncestorsSearched = 3;
 
@@ -101,6 +88,15 @@ bool IsLine(const Eigen::Vector3d& ascending_eigenvalues) {
 }
 
 }  // namespace
+
+std::pair<int, int> ShapeNodeOf(const Octree& tree, int depth, int node, int min_count) {
+  while (static_cast<int>(tree.level(depth).count[node]) < min_count && depth > 0) {
+    node = tree.level(depth).parent[node];
+    --depth;
+  }
+  if (static_cast<int>(tree.level(depth).count[node]) < min_count) return {-1, -1};
+  return {depth, node};
+}
 
 std::optional<double> LineShapedFraction(const Octree& tree, int min_count_for_covariance) {
   // 2,048 samples: the fraction within ~0.01 (binomial standard error; 0.12 ms a depth-9 scan

@@ -399,9 +399,20 @@ struct TreeRefinementResult {
 std::pair<int, int> StageDepths(const Octree& source, const Octree& target,
                                 const TreeRefinementOptions& options);
 
+// A node's points lie along a line when the middle eigenvalue of their covariance is under this
+// fraction of the largest (one scan ring's arc: ~1e-3; a cell of surface holding two rings already
+// ~0.5). The refinement's line rule reads it, and so does the weak-direction chamfer's weighting.
+inline constexpr double kLineEigenvalueRatio = 0.05;
+
+// The node whose shape `node` of `depth` reads: the nearest on its path to the root (itself first)
+// holding at least min_count points, as {depth, node}; {-1, -1} when none does. A node with too
+// few points for a covariance of its own borrows its nearest such ancestor's (the parent's patch of
+// the same surface).
+std::pair<int, int> ShapeNodeOf(const Octree& tree, int depth, int node, int min_count);
+
 // What TreeRefinementOptions::line_normals_from_planes left unset is chosen from: the fraction of
 // a tree's deepest nodes with a shape (min_count_for_covariance points or more) whose points lie
-// along a line (kLineEigenvalueRatio in tree_refinement.cc), over an even stride of at most 2,048
+// along a line (kLineEigenvalueRatio), over an even stride of at most 2,048
 // nodes. nullopt when fewer than 100 of those have a shape, too few to tell (an object's tree at
 // depth 6: most of its fine nodes hold one or two points and read an ancestor's shape).
 std::optional<double> LineShapedFraction(const Octree& tree, int min_count_for_covariance);

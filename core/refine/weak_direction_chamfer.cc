@@ -23,20 +23,14 @@ std::vector<double> CrossingWeights(const Octree& tree, int depth, const Eigen::
   const Octree::Level& level = tree.level(depth);
   std::vector<double> weights(level.size(), 0.0);
   // Siblings share their parent's shape, and are adjacent in the Morton order.
-  int last_node = -1;
-  int last_depth = -1;
+  std::pair<int, int> last = {-1, -1};
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
   for (size_t i = 0; i < level.size(); ++i) {
-    int d = depth - 1;
-    int node = level.parent[i];
-    while (d > 0 && static_cast<int>(tree.level(d).count[node]) < kMinShapeCount) {
-      node = tree.level(d).parent[node];
-      --d;
-    }
-    if (node != last_node || d != last_depth) {
-      solver.computeDirect(tree.Covariance(d, node).cast<double>());
-      last_node = node;
-      last_depth = d;
+    std::pair<int, int> shape = ShapeNodeOf(tree, depth - 1, level.parent[i], kMinShapeCount);
+    if (shape.first < 0) shape = {0, 0};  // a tree of fewer points: the root's spread, whatever
+    if (shape != last) {
+      solver.computeDirect(tree.Covariance(shape.first, shape.second).cast<double>());
+      last = shape;
     }
     const Eigen::Vector3d x = level.center_of_mass[i].cast<double>();
     const Eigen::Vector3d motion = placed.linear().transpose() * (moved * x - placed * x);

@@ -46,7 +46,7 @@ struct WeakChamferOptions {
   // springs' read 0.12-0.27, the blobs' and laptops' 0.01-0.08 (unseen study, clean).
   double min_weakest_eigenvalue = 0.1;
   // A shape is a line when its middle eigenvalue is under this fraction of its largest.
-  double line_eigenvalue_ratio = 0.05;
+  double line_eigenvalue_ratio = kLineEigenvalueRatio;
 };
 
 struct WeakChamferMove {

@@ -827,31 +827,24 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   if (net_refine && options.search_half_turn_start && best.valid && symmetries.empty() &&
       !revolution.has_value() && !IsDeepPair(source, target, refinement) &&
       best.fitness + kHalfTurnFitnessGain <= 1.0) {
-    std::vector<Eigen::Isometry3d> poses = {best.T_target_source};
-    for (const SelfSymmetry& turn : HalfTurnsAboutPrincipalAxes(target)) {
-      poses.push_back(turn.S * best.T_target_source);
-    }
-    const std::vector<double> far = TwoWayFarNodeFractions(
-        source, target, poses, SymmetryDepth(source, target), SelfSymmetryOptions{}.far_cells);
-    for (size_t k = 1; k < poses.size(); ++k) {
-      if (!(far.front() >= 0.0 && far[k] >= 0.0 && far[k] <= far.front() + kHalfTurnFarMargin)) {
-        continue;
-      }
-      const bool kept =
-          try_start_kept_by(poses[k], "half_turn", [&](const TreeRefinementResult& r) {
-            // A twin refined back next to the answer is the answer better settled, not the other
-            // flip: what it would change is the confidence alone.
-            if (!(r.fitness >= best.fitness + kHalfTurnFitnessGain &&
-                  r.fitness >= kHalfTurnMinFitness) ||
-                NearlyEqual(r.T_target_source, best.T_target_source, source, target)) {
-              return false;
-            }
-            if (!best_closeness) best_closeness = closeness(best);
-            const double twin_closeness = closeness(r);
-            // Negative: not measurable, so not closer.
-            return twin_closeness >= 0.0 && *best_closeness >= 0.0 &&
-                   twin_closeness <= (1.0 - kHalfTurnCloserBy) * *best_closeness;
-          });
+    // The twins of the answer as it stands here: the loop ends once one is kept.
+    for (const Eigen::Isometry3d& twin :
+         TwinsFittingAlike(source, target, best.T_target_source,
+                           HalfTurnsAboutPrincipalAxes(target), kHalfTurnFarMargin)) {
+      const bool kept = try_start_kept_by(twin, "half_turn", [&](const TreeRefinementResult& r) {
+        // A twin refined back next to the answer is the answer better settled, not the other
+        // flip: what it would change is the confidence alone.
+        if (!(r.fitness >= best.fitness + kHalfTurnFitnessGain &&
+              r.fitness >= kHalfTurnMinFitness) ||
+            NearlyEqual(r.T_target_source, best.T_target_source, source, target)) {
+          return false;
+        }
+        if (!best_closeness) best_closeness = closeness(best);
+        const double twin_closeness = closeness(r);
+        // Negative: not measurable, so not closer.
+        return twin_closeness >= 0.0 && *best_closeness >= 0.0 &&
+               twin_closeness <= (1.0 - kHalfTurnCloserBy) * *best_closeness;
+      });
       if (kept) break;
     }
   }

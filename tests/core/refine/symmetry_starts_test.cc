@@ -185,6 +185,11 @@ TEST(SymmetryStartsTest, AGuitarFlippedFrontToBackNearlyMapsOntoItself) {
     EXPECT_LT(far[2], 0.02);
     EXPECT_GT(far[0], 0.1);
     EXPECT_GT(far[1], 0.1);
+    // The same target as its own source: only the flip fits about as well as the identity.
+    const std::vector<Eigen::Isometry3d> alike =
+        TwinsFittingAlike(target, target, Eigen::Isometry3d::Identity(), turns, 0.02);
+    ASSERT_EQ(alike.size(), 1u);
+    EXPECT_TRUE(alike.front().isApprox(turns[2].S));
   }
   EXPECT_TRUE(HalfTurnsAboutPrincipalAxes(Octree{}).empty());
 }
