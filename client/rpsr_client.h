@@ -180,6 +180,10 @@ struct RegisterOptions {
   // onto itself under it (a guitar flipped front to back), kept when it fits clearly better
   // (proto RegisterOptions.half_turn_start).
   bool half_turn_start = true;
+  // With round_axis_start: the turns of a screw the target nearly maps onto itself under (a helix
+  // spring), each advanced by its share of the pitch, scored beside the plain turns (proto
+  // RegisterOptions.screw_turns).
+  bool screw_turns = true;
   // Check a scene-scale answer that puts the two sensors together against a search over the
   // structure off the ground (proto RegisterOptions.sensor_aligned_check); in mode refine a
   // losing answer is kept but doubted (confidence capped, failure_reason naming the other pose).

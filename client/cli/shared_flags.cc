@@ -96,6 +96,10 @@ ABSL_FLAG(bool, half_turn_start, true,
           "target's principal axes nearly maps it onto itself (a guitar flipped front to back), "
           "also refine the answer turned by it, and keep that when it fits clearly better by a "
           "wide margin");
+ABSL_FLAG(bool, screw_turns, true,
+          "with --round_axis_start: where the target nearly maps onto itself under a screw about "
+          "a round axis (a helix spring), also try the screw's turns, each advanced along the "
+          "axis by its share of the pitch (a spring tens of degrees off along its screw)");
 ABSL_FLAG(bool, weak_direction_finest_round, false,
           "with --weak_direction_start, when its step kept nothing and the answer is clean and "
           "whole: the same step once more at the finest depth (a little more accurate on clean "
@@ -167,6 +171,7 @@ void ApplyRegistrationFlags(core::RegistrationOptions& options) {
   options.search_extent_slide = absl::GetFlag(FLAGS_extent_slide);
   options.search_weak_direction_chamfer = absl::GetFlag(FLAGS_weak_direction_chamfer);
   options.search_half_turn_start = absl::GetFlag(FLAGS_half_turn_start);
+  options.round_axis_screw_turns = absl::GetFlag(FLAGS_screw_turns);
   options.check_sensor_aligned_answers = absl::GetFlag(FLAGS_sensor_aligned_check);
   options.refinement.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
   options.refinement.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);

@@ -144,6 +144,18 @@ std::vector<SelfSymmetry> HalfTurnsAboutPrincipalAxes(const Octree& target,
   return turns;
 }
 
+absl::StatusOr<TreeRefinementResult> SelfRegisteredFromQuarterTurn(const Octree& target,
+                                                                   const Eigen::Vector3d& point,
+                                                                   const Eigen::Vector3d& axis,
+                                                                   TreeRefinementCache& cache) {
+  TreeRefinementOptions lean;
+  lean.finest_depth = std::max(SymmetryDepth(target, target) - 1, 1);
+  lean.rebin_coarse_depths = false;
+  lean.joint_finest_stage = false;
+  lean.noise_polish = false;
+  return RefineOnTrees(target, target, TurnAbout(point, axis, 0.5 * M_PI), lean, cache);
+}
+
 namespace {
 
 // A line about which a body of revolution may turn: a unit axis through a point.
@@ -160,23 +172,16 @@ struct TurnLine {
 // The refinement's translation is not read: a round table's flat top and thin column hardly
 // constrain it (the self-registration reads the translations across the axis degenerate), and
 // a line through it missed a test table's axis by 0.06 where its centre of mass lies within
-// sampling's ~0.01, which a body of revolution's centre of mass does in the limit. The
-// refinement stops one depth above SymmetryDepth and refines the source's own cells (no
-// re-binning, no joint stage): enough to level the axis, at about a quarter of a full
-// refinement's cost (no noise polish either: the target lies on itself, nothing scatters). Its
-// result is read when it is valid or invalid only for degenerate directions (as a round table's
+// sampling's ~0.01, which a body of revolution's centre of mass does in the limit. The lean
+// self-registration (SelfRegisteredFromQuarterTurn) is enough to level the axis. Its result is
+// read when it is valid or invalid only for degenerate directions (as a round table's
 // is: the self-registration finds the translations across the axis unconstrained); `start`
 // itself where it failed otherwise (no overlap, a singular system), or ended turned by less than
 // min_axis_turn_deg (a small turn's axis is noise). `cache`: shared by a target's calls.
 TurnLine RefineTurnLine(const Octree& target, const TurnLine& start,
                         const SelfSymmetryOptions& options, TreeRefinementCache& cache) {
-  TreeRefinementOptions lean;
-  lean.finest_depth = std::max(SymmetryDepth(target, target) - 1, 1);
-  lean.rebin_coarse_depths = false;
-  lean.joint_finest_stage = false;
-  lean.noise_polish = false;
   const absl::StatusOr<TreeRefinementResult> refined =
-      RefineOnTrees(target, target, TurnAbout(start.point, start.axis, 0.5 * M_PI), lean, cache);
+      SelfRegisteredFromQuarterTurn(target, start.point, start.axis, cache);
   if (!refined.ok() || !(refined->valid || refined->num_degenerate > 0)) return start;
   const Eigen::AngleAxisd turn(refined->T_target_source.linear());
   if (!(turn.angle() >= options.min_axis_turn_deg * M_PI / 180.0) || !turn.axis().allFinite()) {

@@ -26,6 +26,8 @@
 #include <vector>
 
 #include "Eigen/Geometry"
+#include "absl/status/statusor.h"
+#include "core/refine/tree_refinement.h"
 #include "core/tree/bh_tree.h"
 
 namespace rpsr::core {
@@ -132,6 +134,17 @@ std::vector<SelfSymmetry> TurnsAboutRoundAxes(const Octree& target, double step_
 // (RegistrationOptions::search_half_turn_start).
 std::vector<SelfSymmetry> HalfTurnsAboutPrincipalAxes(const Octree& target,
                                                       const SelfSymmetryOptions& options = {});
+
+// The target registered onto itself from the quarter turn about the line through `point` along
+// the unit `axis`, leanly: the stages stop one depth above SymmetryDepth and refine the source's
+// own cells (no re-binning, no joint stage, no noise polish: the target lies on itself, nothing
+// scatters), about a quarter of a full refinement's cost. Where the target maps onto itself under
+// turns about a line near `axis` (a body of revolution) or under a screw along it (a helix
+// spring), it ends at one of those. `cache`: shared by a target's calls.
+absl::StatusOr<TreeRefinementResult> SelfRegisteredFromQuarterTurn(const Octree& target,
+                                                                   const Eigen::Vector3d& point,
+                                                                   const Eigen::Vector3d& axis,
+                                                                   TreeRefinementCache& cache);
 
 // A target that is a body of revolution (a vase, a round table): every turn about `axis` through
 // `centre` (target frame) maps it onto itself, so no registration can measure the turn about it,

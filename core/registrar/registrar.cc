@@ -23,6 +23,7 @@
 #include "core/refine/extent_slide.h"
 #include "core/refine/node_closeness.h"
 #include "core/refine/principal_axes_start.h"
+#include "core/refine/screw_turns.h"
 #include "core/refine/symmetry_starts.h"
 #include "core/refine/weak_direction_chamfer.h"
 #include "core/refine/weak_direction_start.h"
@@ -748,12 +749,19 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   }
   // The round-axis start (RegistrationOptions::search_round_axis_start). Skipped where the target
   // has near-symmetries (`symmetries` non-empty: twins fit alike, and the twin margin speaks for
-  // them); `symmetries` is also empty for scene-scale pairs, hence the depth test.
+  // them); `symmetries` is also empty for scene-scale pairs, hence the depth test. A screw's turns
+  // (round_axis_screw_turns: a helix spring) compete with the plain ones by the same count.
   if (net_refine && options.search_round_axis_start && best.valid &&
       result.confidence < kConfidentEnough && symmetries.empty() && !revolution.has_value() &&
       !IsDeepPair(source, target, refinement)) {
     constexpr double kRoundAxisStepDeg = 15.0;
-    const std::vector<SelfSymmetry> turns = TurnsAboutRoundAxes(target, kRoundAxisStepDeg);
+    std::vector<SelfSymmetry> turns = TurnsAboutRoundAxes(target, kRoundAxisStepDeg);
+    if (options.round_axis_screw_turns) {
+      if (const std::optional<ScrewSymmetry> screw = FindScrewSymmetry(target)) {
+        const std::vector<SelfSymmetry> screw_turns = ScrewTurns(*screw, kRoundAxisStepDeg);
+        turns.insert(turns.end(), screw_turns.begin(), screw_turns.end());
+      }
+    }
     if (std::optional<SymmetricTwin> turned =
             BestSymmetricTwin(source, target, best.T_target_source, turns)) {
       try_start(turned->T_target_source, "round_axis");

@@ -321,6 +321,18 @@ BENCHMARK(BM_RegisterHalfTurnStart)
     ->ArgsProduct({{static_cast<int>(RegistrationMode::kNetRefine)}, {0, 2}, {0, 1}})
     ->Unit(benchmark::kMillisecond);
 
+// net+refine with the round-axis start's screw turns (screw:1, the default: RegistrationOptions::
+// round_axis_screw_turns) and without (screw:0), on the objects (pairs:0) and their jittered
+// copies (pairs:2): where the round-axis start runs, one lean self-registration of the target and
+// 23 more poses' two-way far fractions when it shows a screw.
+void BM_RegisterScrewTurns(benchmark::State& state) {
+  RunObjectsWithSwitch(state, &RegistrationOptions::round_axis_screw_turns);
+}
+BENCHMARK(BM_RegisterScrewTurns)
+    ->ArgNames({"mode", "pairs", "screw"})
+    ->ArgsProduct({{static_cast<int>(RegistrationMode::kNetRefine)}, {0, 2}, {0, 1}})
+    ->Unit(benchmark::kMillisecond);
+
 // Objects jittered by 0.08, with the noise polish (polish:1) and without (polish:0).
 void BM_RegisterJitteredObjects(benchmark::State& state) {
   RunRegister(state, JitteredObjectTrees(), false, SharedRegistrar(),

@@ -266,6 +266,17 @@ TEST(ProtoConvertTest, HalfTurnStartIsOnUnlessTurnedOff) {
   EXPECT_FALSE(options->search_half_turn_start);
 }
 
+TEST(ProtoConvertTest, ScrewTurnsAreOnUnlessTurnedOff) {
+  auto options = OptionsFromProto({});
+  ASSERT_TRUE(options.ok());
+  EXPECT_TRUE(options->round_axis_screw_turns);
+  v1::RegisterOptions proto;
+  proto.set_screw_turns(false);
+  options = OptionsFromProto(proto);
+  ASSERT_TRUE(options.ok());
+  EXPECT_FALSE(options->round_axis_screw_turns);
+}
+
 TEST(ProtoConvertTest, WeakDirectionFinestRoundIsOffUnlessTurnedOn) {
   auto options = OptionsFromProto({});
   ASSERT_TRUE(options.ok());

@@ -125,10 +125,12 @@ TEST(RegistrarSecondStartTest, OfTwoEquallyFittingAnswersTheCloserOneIsKept) {
   const Octree source = TreeOf(pair->source);
   const Octree target = TreeOf(pair->target);
   // The weak-direction chamfer would move the network start's twin 3.7 degrees from the pose
-  // (registrar_test's RegistrarWeakDirectionChamferTest covers it); off in every arm, so that
-  // this test keeps covering the choice between the two starts.
+  // (registrar_test's RegistrarWeakDirectionChamferTest covers it), and the round-axis start's
+  // screw turns bring it back to 0.5 (RegistrarScrewTurnsTest covers those); both off in every
+  // arm, so that this test keeps covering the choice between the two starts.
   RegistrationOptions every_pass = EveryPassFirst();
   every_pass.search_weak_direction_chamfer = false;
+  every_pass.round_axis_screw_turns = false;
   RegistrationOptions network_start = every_pass;
   network_start.also_refine_from_initial = false;
   RegistrationOptions guess_start = every_pass;
