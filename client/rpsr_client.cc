@@ -140,6 +140,7 @@ void ToProto(const RegisterOptions& in, rpsr::v1::RegisterOptions* out) {
   out->set_weak_direction_chamfer(in.weak_direction_chamfer);
   out->set_half_turn_start(in.half_turn_start);
   out->set_screw_turns(in.screw_turns);
+  out->set_far_valley(in.far_valley);
   out->set_sensor_aligned_check(in.sensor_aligned_check);
   out->set_rebin_coarse_depths(in.rebin_coarse_depths);
   out->set_joint_finest_stage(in.joint_finest_stage);

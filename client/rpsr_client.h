@@ -184,6 +184,10 @@ struct RegisterOptions {
   // spring), each advanced by its share of the pitch, scored beside the plain turns (proto
   // RegisterOptions.screw_turns).
   bool screw_turns = true;
+  // Move the answer along its least constrained direction to the middle of the stretch where the
+  // fewest nodes lack a partner (a spring off along its screw), when that direction is still
+  // constrained (proto RegisterOptions.far_valley).
+  bool far_valley = true;
   // Check a scene-scale answer that puts the two sensors together against a search over the
   // structure off the ground (proto RegisterOptions.sensor_aligned_check); in mode refine a
   // losing answer is kept but doubted (confidence capped, failure_reason naming the other pose).
@@ -254,7 +258,8 @@ struct RegistrationResult {
   std::string mode;
   // Where the returned pose's refinement started ("network", "network_later_passes", "initial",
   // "searched", "searched_turns", "structure", "round_axis", "weak_direction", "centroid",
-  // "principal_axes", "extent_slide", "weak_direction_chamfer", "half_turn", "symmetric") and how
+  // "principal_axes", "extent_slide", "weak_direction_chamfer", "far_valley", "half_turn",
+  // "symmetric") and how
   // many starts the server refined or measured for this pair (proto RegistrationResult.start,
   // .starts).
   std::string start;

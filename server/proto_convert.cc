@@ -115,6 +115,7 @@ absl::StatusOr<core::RegistrationOptions> OptionsFromProto(const v1::RegisterOpt
   }
   if (proto.has_half_turn_start()) options.search_half_turn_start = proto.half_turn_start();
   if (proto.has_screw_turns()) options.round_axis_screw_turns = proto.screw_turns();
+  if (proto.has_far_valley()) options.search_far_valley = proto.far_valley();
   if (proto.has_weak_direction_finest_round()) {
     options.weak_direction_finest_round = proto.weak_direction_finest_round();
   }

@@ -141,15 +141,15 @@ int RunCalibrateCommand(const std::vector<std::string>& /*args*/) {
   // passes and options, on its own seeded pair sets (--pair_seed, --object_pairs, --lidar_pairs).
   // A flag that would change either is refused rather than silently ignored: a confidence
   // measured on other settings than the user meant would mislead.
-  // Packed by hand: clang-format would put each of the 30 names on a line of its own.
+  // Packed by hand: clang-format would put each of the 31 names on a line of its own.
   // clang-format off
   const std::vector<std::string> refused = GivenAmong(
       {"mode", "passes", "later_passes_when_unconfident", "refine_from_initial",
        "search_scene_start", "symmetric_starts", "weak_direction_start",
        "weak_direction_finest_round", "centroid_start", "principal_axes_start", "extent_slide",
        "weak_direction_chamfer", "half_turn_start", "round_axis_start", "screw_turns",
-       "sensor_aligned_check", "rebin_coarse_depths", "joint_finest_stage", "noise_polish",
-       "coarse_wide_search", "line_normals_from_planes",
+       "far_valley", "sensor_aligned_check", "rebin_coarse_depths", "joint_finest_stage",
+       "noise_polish", "coarse_wide_search", "line_normals_from_planes",
        "hold_degenerate_at_initial", "tree_depth", "protocol", "seed", "num_points", "count",
        "split", "disturbance", "level"});
   // clang-format on

@@ -29,7 +29,8 @@ struct PairReport {
   std::string mode;
   std::string start;  // where it started: network, network_later_passes, initial, searched,
                       // searched_turns, structure, round_axis, weak_direction, centroid,
-                      // symmetric
+                      // principal_axes, extent_slide, weak_direction_chamfer, far_valley,
+                      // half_turn, symmetric
   int starts = 0;     // refinement starts tried for this pair
   // Degenerate, and kept at the initial guess along the unconstrained directions.
   bool held_at_initial = false;

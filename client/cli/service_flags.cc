@@ -57,6 +57,7 @@ void ApplyRegistrationFlags(RegisterOptions& options) {
   options.weak_direction_chamfer = absl::GetFlag(FLAGS_weak_direction_chamfer);
   options.half_turn_start = absl::GetFlag(FLAGS_half_turn_start);
   options.screw_turns = absl::GetFlag(FLAGS_screw_turns);
+  options.far_valley = absl::GetFlag(FLAGS_far_valley);
   options.sensor_aligned_check = absl::GetFlag(FLAGS_sensor_aligned_check);
   options.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
   options.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);

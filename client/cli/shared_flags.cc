@@ -100,6 +100,11 @@ ABSL_FLAG(bool, screw_turns, true,
           "with --round_axis_start: where the target nearly maps onto itself under a screw about "
           "a round axis (a helix spring), also try the screw's turns, each advanced along the "
           "axis by its share of the pitch (a spring tens of degrees off along its screw)");
+ABSL_FLAG(bool, far_valley, true,
+          "eval, register, odometry, bench, net+refine on object-scale trees without "
+          "near-symmetries: when its least constrained direction is still constrained, move the "
+          "answer along it to the middle of the stretch where the fewest nodes lack a partner (a "
+          "spring off along its screw), and keep it when it fits as well");
 ABSL_FLAG(bool, weak_direction_finest_round, false,
           "with --weak_direction_start, when its step kept nothing and the answer is clean and "
           "whole: the same step once more at the finest depth (a little more accurate on clean "
@@ -172,6 +177,7 @@ void ApplyRegistrationFlags(core::RegistrationOptions& options) {
   options.search_weak_direction_chamfer = absl::GetFlag(FLAGS_weak_direction_chamfer);
   options.search_half_turn_start = absl::GetFlag(FLAGS_half_turn_start);
   options.round_axis_screw_turns = absl::GetFlag(FLAGS_screw_turns);
+  options.search_far_valley = absl::GetFlag(FLAGS_far_valley);
   options.check_sensor_aligned_answers = absl::GetFlag(FLAGS_sensor_aligned_check);
   options.refinement.rebin_coarse_depths = absl::GetFlag(FLAGS_rebin_coarse_depths);
   options.refinement.joint_finest_stage = absl::GetFlag(FLAGS_joint_finest_stage);

@@ -39,6 +39,7 @@ ABSL_DECLARE_FLAG(bool, extent_slide);
 ABSL_DECLARE_FLAG(bool, weak_direction_chamfer);
 ABSL_DECLARE_FLAG(bool, half_turn_start);
 ABSL_DECLARE_FLAG(bool, screw_turns);
+ABSL_DECLARE_FLAG(bool, far_valley);
 ABSL_DECLARE_FLAG(bool, sensor_aligned_check);
 ABSL_DECLARE_FLAG(bool, rebin_coarse_depths);
 ABSL_DECLARE_FLAG(bool, joint_finest_stage);
@@ -65,7 +66,8 @@ std::optional<core::ObjectSplit> ParseObjectSplitFlag(const std::string& name,
 // --refine_from_initial,
 // --search_scene_start, --symmetric_starts, --round_axis_start, --weak_direction_start,
 // --weak_direction_finest_round, --centroid_start, --principal_axes_start, --extent_slide,
-// --weak_direction_chamfer, --half_turn_start, --screw_turns, --sensor_aligned_check,
+// --weak_direction_chamfer, --half_turn_start, --screw_turns, --far_valley,
+// --sensor_aligned_check,
 // --rebin_coarse_depths, --joint_finest_stage, --noise_polish, --coarse_wide_search,
 // --line_normals_from_planes, --hold_degenerate_at_initial) set on `options`; its mode and initial
 // guess stay the caller's.

@@ -21,6 +21,7 @@
 #include "core/refine/degenerate_hold.h"
 #include "core/refine/dominant_plane.h"
 #include "core/refine/extent_slide.h"
+#include "core/refine/far_valley.h"
 #include "core/refine/node_closeness.h"
 #include "core/refine/principal_axes_start.h"
 #include "core/refine/screw_turns.h"
@@ -898,6 +899,19 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
     if (std::optional<WeakChamferMove> moved =
             ChamferAlongWeakestDirection(source, target, best, finest_depth)) {
       try_measured_move(moved->T_target_source, "weak_direction_chamfer", /*cap_confidence=*/true);
+    }
+  }
+  // The far-count valley (RegistrationOptions::search_far_valley): under the chamfer's gates,
+  // the answer moved along its weakest direction to the middle of the stretch where the fewest
+  // nodes lack a partner (core/refine/far_valley.h), measured there as the chamfer's move is and
+  // for the same reasons, its confidence at most the answer's.
+  if (net_refine && options.search_far_valley && best.valid &&
+      result.confidence < kExtentSlideMaxAnswerConfidence &&
+      best.fitness >= kWeakChamferMinFitness && !best.noise_polished && symmetries.empty() &&
+      !revolution.has_value() && !IsDeepPair(source, target, refinement)) {
+    if (std::optional<FarValleyMove> moved =
+            FarValleyAlongWeakestDirection(source, target, best, SymmetryDepth(source, target))) {
+      try_measured_move(moved->T_target_source, "far_valley", /*cap_confidence=*/true);
     }
   }
   // The extent slide (RegistrationOptions::search_extent_slide): object-scale trees without

@@ -138,6 +138,17 @@ struct RegistrationOptions {
   // (refinement-notes.md, *The half-turn start*). Proto RegisterOptions.half_turn_start, CLI
   // --half_turn_start.
   bool search_half_turn_start = true;
+  // net+refine on object-scale trees under the weak-direction chamfer's gates (no near-symmetry,
+  // not a body of revolution, answers below 0.95 confident fitting 0.98 or more, not noise
+  // polished, the weakest direction still constrained): after the chamfer, the answer moved along
+  // its weakest direction to the middle of the valley in the count of nodes (one depth above the
+  // finest) without a partner, when both its walls rise within 6 cells, it spans a cell or more and
+  // its middle lies a cell or more away (FarValleyAlongWeakestDirection), measured there and kept
+  // when it fits as well; its confidence is at most the answer's. Clean helix springs 4.7-15
+  // degrees off along their screw (two of them moved there by the chamfer's measure) come back to
+  // 0.4-3.9 degrees (refinement-notes.md, *The far-count valley*). Proto
+  // RegisterOptions.far_valley, CLI --far_valley.
+  bool search_far_valley = true;
   // net+refine on object-scale trees whose target has no near-symmetry (nor is a body of
   // revolution), whatever the confidence: the answer stepped 0.5-3 cells (one depth above the
   // finest) either way along its information's weakest direction (a spring's screw, a slide
@@ -316,10 +327,11 @@ struct RegistrationResult {
   // search_weak_direction_start), "centroid" (a further one there, search_centroid_start),
   // "principal_axes" (a further one on object-scale trees, search_principal_axes_start),
   // "extent_slide" (the answer moved until the clouds' ends agree and measured there,
-  // search_extent_slide), "weak_direction_chamfer" (search_weak_direction_chamfer), "half_turn"
-  // (search_half_turn_start) or "symmetric"
+  // search_extent_slide), "weak_direction_chamfer" (search_weak_direction_chamfer), "far_valley"
+  // (the answer moved to the middle of the far-count valley and measured there,
+  // search_far_valley), "half_turn" (search_half_turn_start) or "symmetric"
   // (its third on those with, try_symmetric_starts); and how many starts were refined or measured
-  // for this pair (1-6 on scene-scale trees, 1-13 on object-scale ones, 14 with
+  // for this pair (1-6 on scene-scale trees, 1-14 on object-scale ones, 15 with
   // weak_direction_finest_round; in mode refine 1, or 2 when the sensor-aligned check refined
   // another start to doubt the answer; 0 when the pipeline stopped before refining: the network's
   // output not finite).

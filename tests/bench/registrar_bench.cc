@@ -333,6 +333,18 @@ BENCHMARK(BM_RegisterScrewTurns)
     ->ArgsProduct({{static_cast<int>(RegistrationMode::kNetRefine)}, {0, 2}, {0, 1}})
     ->Unit(benchmark::kMillisecond);
 
+// net+refine with the far-count valley (valley:1, the default: RegistrationOptions::
+// search_far_valley) and without (valley:0), on the objects (pairs:0) and their jittered copies
+// (pairs:2): for answers inside the chamfer's gates, 49 poses' two-way far fractions one depth
+// above the finest, and one measurement where it moves the answer.
+void BM_RegisterFarValley(benchmark::State& state) {
+  RunObjectsWithSwitch(state, &RegistrationOptions::search_far_valley);
+}
+BENCHMARK(BM_RegisterFarValley)
+    ->ArgNames({"mode", "pairs", "valley"})
+    ->ArgsProduct({{static_cast<int>(RegistrationMode::kNetRefine)}, {0, 2}, {0, 1}})
+    ->Unit(benchmark::kMillisecond);
+
 // Objects jittered by 0.08, with the noise polish (polish:1) and without (polish:0).
 void BM_RegisterJitteredObjects(benchmark::State& state) {
   RunRegister(state, JitteredObjectTrees(), false, SharedRegistrar(),

@@ -277,6 +277,17 @@ TEST(ProtoConvertTest, ScrewTurnsAreOnUnlessTurnedOff) {
   EXPECT_FALSE(options->round_axis_screw_turns);
 }
 
+TEST(ProtoConvertTest, FarValleyIsOnUnlessTurnedOff) {
+  auto options = OptionsFromProto({});
+  ASSERT_TRUE(options.ok());
+  EXPECT_TRUE(options->search_far_valley);
+  v1::RegisterOptions proto;
+  proto.set_far_valley(false);
+  options = OptionsFromProto(proto);
+  ASSERT_TRUE(options.ok());
+  EXPECT_FALSE(options->search_far_valley);
+}
+
 TEST(ProtoConvertTest, WeakDirectionFinestRoundIsOffUnlessTurnedOn) {
   auto options = OptionsFromProto({});
   ASSERT_TRUE(options.ok());

@@ -125,12 +125,14 @@ TEST(RegistrarSecondStartTest, OfTwoEquallyFittingAnswersTheCloserOneIsKept) {
   const Octree source = TreeOf(pair->source);
   const Octree target = TreeOf(pair->target);
   // The weak-direction chamfer would move the network start's twin 3.7 degrees from the pose
-  // (registrar_test's RegistrarWeakDirectionChamferTest covers it), and the round-axis start's
-  // screw turns bring it back to 0.5 (RegistrarScrewTurnsTest covers those); both off in every
-  // arm, so that this test keeps covering the choice between the two starts.
+  // (registrar_test's RegistrarWeakDirectionChamferTest covers it), the round-axis start's screw
+  // turns bring it back to 0.5 (RegistrarScrewTurnsTest) and the far-count valley to 2.5
+  // (RegistrarFarValleyTest); all off in every arm, so that this test keeps covering the choice
+  // between the two starts.
   RegistrationOptions every_pass = EveryPassFirst();
   every_pass.search_weak_direction_chamfer = false;
   every_pass.round_axis_screw_turns = false;
+  every_pass.search_far_valley = false;
   RegistrationOptions network_start = every_pass;
   network_start.also_refine_from_initial = false;
   RegistrationOptions guess_start = every_pass;
@@ -420,16 +422,19 @@ TEST(RegistrarSecondStartTest, RoundAxisStartTurnsAMugBackOntoItsHandle) {
 // clean unseen pairs of pair seed 1 (the study's): the helix spring of pair 48, 7 degrees off
 // along its screw without it, ends within 1.5 degrees from the start "weak_direction"; no answer
 // within (1 deg, 0.01) without it is lost with it; where the start is not kept, the answer and
-// its confidence are the very ones without it.
+// its confidence are the very ones without it. The far-count valley, which runs later and brings
+// that spring back without the start (to 0.77 degree; RegistrarFarValleyTest covers it), is off
+// in both arms.
 TEST(RegistrarSecondStartTest, WeakDirectionStartTurnsASpringBackAlongItsScrew) {
-  RegistrationOptions without;
+  RegistrationOptions with;
+  with.search_far_valley = false;
+  RegistrationOptions without = with;
   without.search_weak_direction_start = false;
   int kept = 0;
   std::vector<uint64_t> pairs = {48};
   for (uint64_t i = 0; i < 32; ++i) pairs.push_back(i);
   for (uint64_t i : pairs) {
-    absl::StatusOr<AnswersWithAndWithout> answers =
-        RegisterStudyPair(1, i, without, RegistrationOptions{});
+    absl::StatusOr<AnswersWithAndWithout> answers = RegisterStudyPair(1, i, without, with);
     ASSERT_TRUE(answers.ok()) << answers.status();
     const RegistrationResult* a = &answers->without;
     const RegistrationResult* b = &answers->with;

@@ -18,10 +18,17 @@ namespace {
 using testing_util::AnswersWithAndWithout;
 
 // Pair i of `rpsr eval --protocol objects --split unseen --seed S` (clean), without the chamfer
-// and with it.
+// and with it; the far-count valley, which runs after the chamfer and moves several of these
+// springs too (RegistrarFarValleyTest), off in both.
 AnswersWithAndWithout RegisterWithAndWithout(uint64_t seed, uint64_t i) {
-  return testing_util::RegisterStudyPairWithSwitch(
-      seed, i, &RegistrationOptions::search_weak_direction_chamfer);
+  RegistrationOptions with;
+  with.search_far_valley = false;
+  RegistrationOptions without = with;
+  without.search_weak_direction_chamfer = false;
+  absl::StatusOr<AnswersWithAndWithout> answers =
+      testing_util::RegisterStudyPair(seed, i, without, with);
+  EXPECT_TRUE(answers.ok()) << answers.status();
+  return answers.ok() ? *std::move(answers) : AnswersWithAndWithout{};
 }
 
 TEST(RegistrarWeakDirectionChamferTest, BringsSpringsTurnedAlongTheirScrewBack) {
