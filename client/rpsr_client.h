@@ -184,9 +184,10 @@ struct RegisterOptions {
   // spring), each advanced by its share of the pitch, scored beside the plain turns (proto
   // RegisterOptions.screw_turns).
   bool screw_turns = true;
-  // Move the answer along its least constrained direction to the middle of the stretch where the
-  // fewest nodes lack a partner (a spring off along its screw), when that direction is still
-  // constrained (proto RegisterOptions.far_valley).
+  // Move the answer along its least constrained direction to the middle of the valley in the count
+  // of nodes without a partner (a spring off along its screw), for object answers below 0.95
+  // confidence that overlap almost wholly, cover nine tenths of the target and whose direction is
+  // still constrained; never more confident than the answer (proto RegisterOptions.far_valley).
   bool far_valley = true;
   // Check a scene-scale answer that puts the two sensors together against a search over the
   // structure off the ground (proto RegisterOptions.sensor_aligned_check); in mode refine a

@@ -102,9 +102,11 @@ ABSL_FLAG(bool, screw_turns, true,
           "axis by its share of the pitch (a spring tens of degrees off along its screw)");
 ABSL_FLAG(bool, far_valley, true,
           "eval, register, odometry, bench, net+refine on object-scale trees without "
-          "near-symmetries: when its least constrained direction is still constrained, move the "
-          "answer along it to the middle of the stretch where the fewest nodes lack a partner (a "
-          "spring off along its screw), and keep it when it fits as well");
+          "near-symmetries, answers below 0.95 confidence that overlap almost wholly (fitness "
+          "0.98), were not noise-polished and leave at most a tenth of the target uncovered: when "
+          "the least constrained direction is still constrained, move the answer along it to the "
+          "middle of the valley in the count of nodes without a partner (a spring off along its "
+          "screw), and keep it when it fits as well (never more confident than the answer)");
 ABSL_FLAG(bool, weak_direction_finest_round, false,
           "with --weak_direction_start, when its step kept nothing and the answer is clean and "
           "whole: the same step once more at the finest depth (a little more accurate on clean "

@@ -18,7 +18,10 @@ std::optional<FarValleyMove> FarValleyAlongWeakestDirection(const Octree& source
                                                             const FarValleyOptions& options) {
   if (depth < 1 || depth > source.max_depth() || depth > target.max_depth()) return std::nullopt;
   if (!(answer.normalized_eigenvalues[0] >= options.min_weakest_eigenvalue)) return std::nullopt;
-  if (!(options.step_cells > 0.0) || !(options.reach_cells >= options.step_cells)) {
+  // At most kMaxSteps steps either way (a tiny step would otherwise ask for millions of poses).
+  constexpr double kMaxSteps = 1000.0;
+  if (!(options.step_cells > 0.0) || !(options.reach_cells >= options.step_cells) ||
+      !(options.reach_cells / options.step_cells <= kMaxSteps)) {
     return std::nullopt;
   }
   const double edge = CellEdge(target, depth);
@@ -61,18 +64,21 @@ std::optional<FarValleyMove> FarValleyAlongWeakestDirection(const Octree& source
   int high = least;
   while (low > 0 && far[low - 1] >= 0.0 && far[low - 1] <= ceiling) --low;
   while (high + 1 < n && far[high + 1] >= 0.0 && far[high + 1] <= ceiling) ++high;
-  // Both walls must rise within the reach: a valley running off the search has no middle.
-  if (low == 0 || high == n - 1) return std::nullopt;
+  // Both walls must rise within the reach, measured: a valley running off the search, or into a
+  // step that could not be measured, has no middle.
+  if (low == 0 || high == n - 1 || !(far[low - 1] > ceiling) || !(far[high + 1] > ceiling)) {
+    return std::nullopt;
+  }
   const double valley_cells = (high - low) * options.step_cells;
-  // The middle, on a step (the valley's two ends are steps).
-  const int middle = (low + high) / 2;
-  const double move_cells = (middle - half) * options.step_cells;
+  // The middle, half a step between two steps where the valley spans an odd number of them (so
+  // that the minimum move reads alike on both sides).
+  const double move_cells = (0.5 * (low + high) - half) * options.step_cells;
   if (!(valley_cells >= options.min_valley_cells) ||
       !(std::abs(move_cells) >= options.min_move_cells)) {
     return std::nullopt;
   }
   FarValleyMove out;
-  out.T_target_source = poses[static_cast<size_t>(middle)];
+  out.T_target_source = StepAlongWeakestDirection(answer, move_cells * edge);
   out.move_cells = move_cells;
   out.valley_cells = valley_cells;
   out.least_fraction = far[least];

@@ -10,7 +10,7 @@
 // the steps within two nodes of the least moved right springs under the slightest noise 4-5
 // degrees off); the walls are steep and well placed, so the middle between them, where they have
 // risen a fifth of the way, is what is read. On the clean springs of 20 draws of 100 that ended
-// 4.7-15 degrees off along the screw it lay 0.4-3.9 degrees from the truth
+// 4.7-15 degrees off along the screw it lay 0.4-3.3 degrees from the truth
 // (tests/bench/notes/refinement-notes.md, *The far-count valley*), where the weak-direction
 // chamfer's own measure had moved two of them further off (seed 14's pair 97 8.4 -> 14.9 degrees).
 //

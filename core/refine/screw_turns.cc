@@ -28,6 +28,9 @@ std::optional<ScrewSymmetry> ScrewOf(const Eigen::Isometry3d& T, const Eigen::Ve
   const Eigen::Matrix3d across = Eigen::Matrix3d::Identity() - T.linear();
   const Eigen::Vector3d residual = T.translation() - advance * screw.axis - across * near;
   screw.point = near + across.jacobiSvd(Eigen::ComputeFullU | Eigen::ComputeFullV).solve(residual);
+  // A rotation a refinement returned is orthonormal only to rounding, so the solve may keep a
+  // little of the axis's own direction: the point is put back at the foot of `near`.
+  screw.point -= screw.axis * screw.axis.dot(screw.point - near);
   if (!screw.point.allFinite()) return std::nullopt;
   return screw;
 }
@@ -65,7 +68,8 @@ std::optional<ScrewSymmetry> FindScrewSymmetry(const Octree& target, const Screw
 
 std::vector<SelfSymmetry> ScrewTurns(const ScrewSymmetry& screw, double step_deg) {
   std::vector<SelfSymmetry> turns;
-  if (!(step_deg > 0.0)) return turns;
+  // At least a tenth of a degree (a smaller step would ask for millions of turns).
+  if (!(step_deg >= 0.1)) return turns;
   const int steps = static_cast<int>(std::lround(360.0 / step_deg));
   for (int k = 1; k < steps; ++k) {
     double angle = 2.0 * M_PI * k / steps;

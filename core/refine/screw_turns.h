@@ -61,7 +61,8 @@ std::optional<ScrewSymmetry> FindScrewSymmetry(const Octree& target,
                                                const ScrewOptions& options = {},
                                                const SelfSymmetryOptions& symmetry = {});
 
-// The screw's turns by k * 360 / n degrees (n = round(360 / step_deg), k = 1 .. n - 1, each taken
+// The screw's turns by k * 360 / n degrees (n = round(360 / step_deg), k = 1 .. n - 1; none for a
+// step under a tenth of a degree), each taken
 // in (-180, 180] so that it advances by the shorter way), each advanced by advance_per_rad times
 // its angle, as SelfSymmetry entries (axis -1: not a principal axis; self_distance_cells -1: not
 // checked to be near-symmetries).

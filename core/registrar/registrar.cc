@@ -902,9 +902,10 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
     }
   }
   // The far-count valley (RegistrationOptions::search_far_valley): under the chamfer's gates,
-  // the answer moved along its weakest direction to the middle of the stretch where the fewest
-  // nodes lack a partner (core/refine/far_valley.h), measured there as the chamfer's move is and
-  // for the same reasons, its confidence at most the answer's.
+  // the answer moved along its weakest direction to the middle of the valley in the count of
+  // nodes without a partner (core/refine/far_valley.h, which also refuses a source that leaves a
+  // tenth of the target uncovered), measured there as the chamfer's move is and for the same
+  // reasons, its confidence at most the answer's.
   if (net_refine && options.search_far_valley && best.valid &&
       result.confidence < kExtentSlideMaxAnswerConfidence &&
       best.fitness >= kWeakChamferMinFitness && !best.noise_polished && symmetries.empty() &&

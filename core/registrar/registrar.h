@@ -124,8 +124,9 @@ struct RegistrationOptions {
   // plain turns. A plain turn leaves a coil a fraction of a pitch above itself, so none read
   // better than an answer tens of degrees off along the screw: an unseen spring 44 degrees off at
   // 0.04 confidence was 63% of 2,000 clean pairs' squared rotation error, and comes back to 0.12
-  // (refinement-notes.md, *The screw turns*). Costs one lean self-registration of the target
-  // where the start runs. Proto RegisterOptions.screw_turns, CLI --screw_turns.
+  // (refinement-notes.md, *The screw turns*). Costs one lean self-registration of the target per
+  // round axis tried (one, on most round targets) where the start runs. Proto
+  // RegisterOptions.screw_turns, CLI --screw_turns.
   bool round_axis_screw_turns = true;
   // net+refine on object-scale trees whose target has no near-symmetry nor is a body of
   // revolution, whatever the confidence, answers fitting 0.95 or less: the answer turned by a half
@@ -140,13 +141,15 @@ struct RegistrationOptions {
   bool search_half_turn_start = true;
   // net+refine on object-scale trees under the weak-direction chamfer's gates (no near-symmetry,
   // not a body of revolution, answers below 0.95 confident fitting 0.98 or more, not noise
-  // polished, the weakest direction still constrained): after the chamfer, the answer moved along
+  // polished, the weakest direction still constrained), where the source leaves at most a tenth of
+  // the target's nodes without a partner (a crop takes a wall with it): after the chamfer, the
+  // answer moved along
   // its weakest direction to the middle of the valley in the count of nodes (one depth above the
   // finest) without a partner, when both its walls rise within 6 cells, it spans a cell or more and
   // its middle lies a cell or more away (FarValleyAlongWeakestDirection), measured there and kept
   // when it fits as well; its confidence is at most the answer's. Clean helix springs 4.7-15
   // degrees off along their screw (two of them moved there by the chamfer's measure) come back to
-  // 0.4-3.9 degrees (refinement-notes.md, *The far-count valley*). Proto
+  // 0.4-3.3 degrees (refinement-notes.md, *The far-count valley*). Proto
   // RegisterOptions.far_valley, CLI --far_valley.
   bool search_far_valley = true;
   // net+refine on object-scale trees whose target has no near-symmetry (nor is a body of

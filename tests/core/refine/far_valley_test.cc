@@ -28,7 +28,8 @@ std::string FamilyOf(const testing_util::StudyPairAtTruth& pair) {
 // Clean unseen springs (`rpsr eval --protocol objects --split unseen --count 100 --seed S`) whose
 // answers ended 4.7-7.5 degrees off along the screw: seed 14's pair 23, seed 13's pair 92, seed
 // 5's pair 6. Each refined from its truth, then turned along its weakest direction (the refined
-// information's) by 2 cells one depth above the finest either way.
+// information's) by 2 cells one depth above the finest either way (9-12 degrees): each comes back
+// within 2 degrees.
 TEST(FarValleyTest, BringsSpringsTurnedAlongTheirScrewBack) {
   struct Case {
     uint64_t seed;
@@ -58,9 +59,7 @@ TEST(FarValleyTest, BringsSpringsTurnedAlongTheirScrewBack) {
           static_cast<int>(c.seed), static_cast<int>(c.pair), cells, before, moved->valley_cells,
           moved->least_fraction, moved->move_cells, after);
       EXPECT_LT(moved->move_cells * cells, 0.0) << cells;  // back towards the truth
-      EXPECT_GE(moved->valley_cells, FarValleyOptions{}.min_valley_cells);
-      EXPECT_LE(moved->least_fraction, moved->answer_fraction);
-      EXPECT_LT(after, 0.5 * before) << c.seed << "/" << c.pair << " " << cells;
+      EXPECT_LT(after, 2.0) << c.seed << "/" << c.pair << " " << cells;
     }
   }
 }

@@ -31,7 +31,7 @@ Eigen::Isometry3d Screw(const Eigen::Vector3d& point, const Eigen::Vector3d& axi
 TEST(ScrewTurnsTest, AMotionIsReadBackAsItsScrew) {
   const Eigen::Vector3d axis = Eigen::Vector3d(0.3, -0.4, 0.8).normalized();
   const Eigen::Vector3d point(0.2, 0.1, -0.3);
-  for (double angle_deg : {40.0, 90.0, 170.0}) {
+  for (double angle_deg : {40.0, 90.0, 170.0, 179.5}) {
     for (double advance : {0.05, -0.02, 0.0}) {
       const Eigen::Isometry3d T = Screw(point, axis, angle_deg * M_PI / 180.0, advance);
       const Eigen::Vector3d near(1.0, 0.5, 0.2);
@@ -100,9 +100,6 @@ TEST(ScrewTurnsTest, SpringsAreFoundAboutTheirCoilsAxis) {
         static_cast<int>(c.seed), static_cast<int>(c.pair), off_deg, screw->advance_per_rad / cell,
         far[0], far[1]);
     EXPECT_LT(off_deg, 5.0) << c.seed << "/" << c.pair;
-    EXPECT_GE(std::abs(screw->advance_per_rad) * 0.5 * M_PI,
-              ScrewOptions{}.min_advance_cells * cell);
-    EXPECT_LE(far[0], ScrewOptions{}.max_far_fraction);
     EXPECT_LT(far[0], far[1]) << c.seed << "/" << c.pair;
   }
 }
@@ -115,6 +112,19 @@ TEST(ScrewTurnsTest, BodiesOfRevolutionAndALaptopHaveNoScrew) {
   for (uint64_t seed : {1, 2, 3}) {
     const Octree vase = RefinementTree(testing_util::BodyOfRevolution(1024, seed, axis), 6);
     EXPECT_FALSE(FindScrewSymmetry(vase).has_value()) << "seed " << seed;
+    // Registered onto itself from a quarter turn it ends at a plain turn: under half a cell's
+    // advance.
+    TreeRefinementCache cache;
+    const Eigen::Vector3d centre = vase.level(0).center_of_mass[0].cast<double>();
+    const absl::StatusOr<TreeRefinementResult> self =
+        SelfRegisteredFromQuarterTurn(vase, centre, axis, cache);
+    ASSERT_TRUE(self.ok()) << self.status();
+    const std::optional<ScrewSymmetry> turn = ScrewOf(self->T_target_source, centre, 0.0);
+    ASSERT_TRUE(turn.has_value()) << "seed " << seed;
+    const double advance =
+        std::abs(turn->advance_per_rad) * Eigen::AngleAxisd(self->T_target_source.linear()).angle();
+    EXPECT_LT(advance, ScrewOptions{}.min_advance_cells * CellEdge(vase, SymmetryDepth(vase, vase)))
+        << "seed " << seed;
   }
   const testing_util::StudyPairAtTruth laptop = testing_util::CleanStudyPairAtTruth(1, 30, 6);
   ASSERT_EQ(ShapeFamilies()[static_cast<size_t>(laptop.pair.family_index)].name, "laptop");
