@@ -47,12 +47,14 @@ struct FarValleyOptions {
   // The valley must span at least this many cells (one of a step or two is the least value's
   // sampling, not a stretch the legs bound) ...
   double min_valley_cells = 1.0;
-  // ... and its middle lie at least this far from the answer: the middle lies up to about three
-  // quarter-cells (~3 degrees on the springs) from the truth, so a shorter move is within the
-  // estimate's own spread. At half a cell (with the first version's floor), 11 right springs of
-  // the 20 draws' 2,000 clean pairs were moved 1.8-3.6 degrees off and 5 wrong ones brought within
-  // 1 degree.
-  double min_move_cells = 1.0;
+  // ... and its middle lie at least this far from the answer (a move within the estimate's own
+  // spread would only add noise). With the first version's floor the middle strayed up to three
+  // quarter-cells, and at half a cell 11 right springs of the 20 draws' 2,000 clean pairs were
+  // moved 1.8-3.6 degrees off; read between the walls it strays less: at a cell the 20 draws
+  // read 0.519 degree and the study won 4 answers and lost 1, at half a cell 0.479 (9 won, 2
+  // lost) and the study won 33 more and lost 9 more (refinement-notes.md, *The far-count
+  // valley*).
+  double min_move_cells = 0.5;
   // Only where at most this fraction of the target's nodes (at `depth`) lie farther than far_cells
   // from every source node at the answer: a source cut short lacks one of the walls, and the
   // valley's middle moves. Without this gate the unseen study's seeds 1-5 lost 3 right springs

@@ -84,10 +84,11 @@ inline absl::StatusOr<AnswersWithAndWithout> RegisterStudyPair(
 // Pair i of `rpsr eval --protocol objects --split unseen --seed S` (clean), with the registrar's
 // `option` off and on (everything else default).
 inline AnswersWithAndWithout RegisterStudyPairWithSwitch(uint64_t seed, uint64_t i,
-                                                         bool RegistrationOptions::*option) {
-  RegistrationOptions without;
+                                                         bool RegistrationOptions::*option,
+                                                         const RegistrationOptions& base = {}) {
+  RegistrationOptions without = base;
   without.*option = false;
-  RegistrationOptions with;
+  RegistrationOptions with = base;
   with.*option = true;
   absl::StatusOr<AnswersWithAndWithout> answers = RegisterStudyPair(seed, i, without, with);
   EXPECT_TRUE(answers.ok()) << answers.status();
@@ -96,14 +97,16 @@ inline AnswersWithAndWithout RegisterStudyPairWithSwitch(uint64_t seed, uint64_t
 
 // A step that moves answers (`option`, naming its kept answers `start`) over seed S's clean study
 // pairs 0 .. count - 1: every answer within (1 deg, 0.01) without it stays within it, and where the
-// step keeps nothing, the answer and its confidence are the very ones without it. Returns how many
+// step keeps nothing, the answer and its confidence are the very ones without it (both arms with
+// `base`'s other options, so that a later step can be kept out of the comparison). Returns how many
 // answers the step kept.
 inline int ExpectAnswersKeptWhereTheStepKeepsNothing(uint64_t seed, uint64_t count,
                                                      bool RegistrationOptions::*option,
-                                                     const std::string& start) {
+                                                     const std::string& start,
+                                                     const RegistrationOptions& base = {}) {
   int kept = 0;
   for (uint64_t i = 0; i < count; ++i) {
-    const AnswersWithAndWithout answers = RegisterStudyPairWithSwitch(seed, i, option);
+    const AnswersWithAndWithout answers = RegisterStudyPairWithSwitch(seed, i, option, base);
     if (answers.error_without.rotation_deg <= 1.0 && answers.error_without.translation <= 0.01) {
       EXPECT_LE(answers.error_with.rotation_deg, 1.0) << "pair " << i;
       EXPECT_LE(answers.error_with.translation, 0.01) << "pair " << i;
