@@ -203,7 +203,7 @@ TEST_F(ServiceEndToEndTest, RegisterOnTheServerMatchesLocal) {
 TEST_F(ServiceEndToEndTest, RegisterStartsFromTheInitialGuess) {
   const std::string pair = absl::StrCat(Data("object/clouds/000000_source.ply"), " ",
                                         Data("object/clouds/000000_target.ply"));
-  for (const std::string where : {std::string("--local"), absl::StrCat("--server ", Server())}) {
+  for (const std::string& where : {std::string("--local"), absl::StrCat("--server ", Server())}) {
     ASSERT_EQ(Rpsr(absl::StrCat("register ", pair, " ", where, " --mode refine --json --initial '",
                                 Truth("object"), "' --truth '", Truth("object"), "'")),
               0)
@@ -226,7 +226,7 @@ TEST_F(ServiceEndToEndTest, RegisterStartsFromTheInitialGuess) {
   const std::string corridor = absl::StrCat(
       (*dir_ / "corridor_source.xyz").string(), " ", (*dir_ / "corridor_target.xyz").string(),
       " --mode refine --json --initial '1 0 0 0.6  0 1 0 0.15  0 0 1 0  0 0 0 1'");
-  for (const std::string where : {std::string("--local"), absl::StrCat("--server ", Server())}) {
+  for (const std::string& where : {std::string("--local"), absl::StrCat("--server ", Server())}) {
     EXPECT_EQ(Rpsr(absl::StrCat("register ", corridor, " ", where)), 3) << where << ": " << err_;
     EXPECT_THAT(out_, HasSubstr("\"held_at_initial\": true")) << where << ": " << out_;
     const size_t translation = out_.find("\"translation\": [");
