@@ -25,6 +25,7 @@
 
 #include "Eigen/Geometry"
 #include "core/refine/tree_refinement.h"
+#include "core/refine/weak_direction_chamfer.h"
 #include "core/tree/bh_tree.h"
 
 namespace rpsr::core {
@@ -66,7 +67,7 @@ struct FarValleyOptions {
   // Only where the weakest direction's normalised information eigenvalue is at least this (the
   // weak-direction chamfer's gate, WeakChamferOptions: springs 0.12-0.27; a nearly unconstrained
   // direction, a blob's turn or a laptop's hinge, leaves no feature to raise a wall).
-  double min_weakest_eigenvalue = 0.1;
+  double min_weakest_eigenvalue = WeakChamferOptions{}.min_weakest_eigenvalue;
 };
 
 struct FarValleyMove {

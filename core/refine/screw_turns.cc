@@ -1,7 +1,5 @@
 #include "core/refine/screw_turns.h"
 
-#include <algorithm>
-#include <array>
 #include <cmath>
 
 #include "Eigen/SVD"
@@ -39,14 +37,10 @@ std::optional<ScrewSymmetry> FindScrewSymmetry(const Octree& target, const Screw
                                                const SelfSymmetryOptions& symmetry) {
   if (target.max_depth() < 2 || target.num_points() == 0) return std::nullopt;
   const PrincipalAxes principal = PrincipalAxesOf(target, symmetry);
-  std::array<int, 3> order = {0, 1, 2};
-  std::sort(order.begin(), order.end(),
-            [&](int a, int b) { return principal.roundness[a] > principal.roundness[b]; });
   const int depth = SymmetryDepth(target, target);
   const double cell = CellEdge(target, depth);
   TreeRefinementCache cache;  // the target's cells and shapes, once for every axis tried
-  for (int axis : order) {
-    if (!principal.round[axis]) break;
+  for (int axis : RoundAxesRoundestFirst(principal)) {
     const absl::StatusOr<TreeRefinementResult> refined =
         SelfRegisteredFromQuarterTurn(target, principal.centre, principal.axes.col(axis), cache);
     // As for a body of revolution's axis: read when valid or invalid only for degenerate
@@ -55,8 +49,7 @@ std::optional<ScrewSymmetry> FindScrewSymmetry(const Octree& target, const Screw
     std::optional<ScrewSymmetry> screw =
         ScrewOf(refined->T_target_source, principal.centre, options.min_turn_deg * M_PI / 180.0);
     if (!screw.has_value()) continue;
-    const double advance =
-        screw->advance_per_rad * Eigen::AngleAxisd(refined->T_target_source.linear()).angle();
+    const double advance = screw->axis.dot(refined->T_target_source.translation());
     if (!(std::abs(advance) >= options.min_advance_cells * cell)) continue;
     const std::vector<SelfSymmetry> quarter = ScrewTurns(*screw, 90.0);  // +90, 180, -90
     const double far =

@@ -1,7 +1,6 @@
 #include "core/refine/symmetry_starts.h"
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <complex>
 
@@ -77,6 +76,16 @@ PrincipalAxes PrincipalAxesOf(const Octree& tree, const SelfSymmetryOptions& opt
     out.round[axis] = std::max(a, b) > 0.0 && out.roundness[axis] >= options.min_round_ratio;
   }
   return out;
+}
+
+std::vector<int> RoundAxesRoundestFirst(const PrincipalAxes& principal) {
+  std::vector<int> order;
+  for (int axis = 0; axis < 3; ++axis) {
+    if (principal.round[axis]) order.push_back(axis);
+  }
+  std::sort(order.begin(), order.end(),
+            [&](int a, int b) { return principal.roundness[a] > principal.roundness[b]; });
+  return order;
 }
 
 int SymmetryDepth(const Octree& source, const Octree& target) {
@@ -251,12 +260,8 @@ std::optional<ContinuousSymmetry> FindContinuousSymmetry(const Octree& target,
   // variances are alike (4 of 300 unseen-class targets, 12 of 200 seen-class), where sampling may
   // also make the true axis's principal estimate the less round (two round tables among those 200
   // were found only about a less round one).
-  std::array<int, 3> order = {0, 1, 2};
-  std::sort(order.begin(), order.end(),
-            [&](int a, int b) { return principal.roundness[a] > principal.roundness[b]; });
   TreeRefinementCache cache;  // the target's cells and shapes, once for every axis tried
-  for (int axis : order) {
-    if (!principal.round[axis]) break;
+  for (int axis : RoundAxesRoundestFirst(principal)) {
     std::optional<ContinuousSymmetry> found =
         RoundAbout(target, TurnLine{principal.axes.col(axis), principal.centre}, options, cache);
     if (found.has_value()) return found;

@@ -283,6 +283,10 @@ struct PrincipalAxes {
 };
 PrincipalAxes PrincipalAxesOf(const Octree& tree, const SelfSymmetryOptions& options = {});
 
+// The round axes (0-2) of `principal`, the roundest first: the order FindContinuousSymmetry and
+// FindScrewSymmetry try them in.
+std::vector<int> RoundAxesRoundestFirst(const PrincipalAxes& principal);
+
 }  // namespace rpsr::core
 
 #endif  // RPSR_CORE_REFINE_SYMMETRY_STARTS_H_

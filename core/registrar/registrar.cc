@@ -892,10 +892,13 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   // extent slide's is. Its confidence is at most the answer's: measured without refining, a moved
   // answer reads as settled as any (a spring moved 2 degrees the wrong way read 0.98), and the
   // move itself is not evidence the calibration has seen.
-  if (net_refine && options.search_weak_direction_chamfer && best.valid &&
-      result.confidence < kExtentSlideMaxAnswerConfidence &&
-      best.fitness >= kWeakChamferMinFitness && !best.noise_polished && symmetries.empty() &&
-      !revolution.has_value() && !IsDeepPair(source, target, refinement)) {
+  // Read at each use: the chamfer's move changes the answer the valley then looks at.
+  auto inside_weak_move_gates = [&] {
+    return net_refine && best.valid && result.confidence < kExtentSlideMaxAnswerConfidence &&
+           best.fitness >= kWeakChamferMinFitness && !best.noise_polished && symmetries.empty() &&
+           !revolution.has_value() && !IsDeepPair(source, target, refinement);
+  };
+  if (options.search_weak_direction_chamfer && inside_weak_move_gates()) {
     if (std::optional<WeakChamferMove> moved =
             ChamferAlongWeakestDirection(source, target, best, finest_depth)) {
       try_measured_move(moved->T_target_source, "weak_direction_chamfer", /*cap_confidence=*/true);
@@ -906,10 +909,7 @@ RegistrationResult Registrar::State::Finish(const Octree& source, const Octree& 
   // nodes without a partner (core/refine/far_valley.h, which also refuses a source that leaves a
   // tenth of the target uncovered), measured there as the chamfer's move is and for the same
   // reasons, its confidence at most the answer's.
-  if (net_refine && options.search_far_valley && best.valid &&
-      result.confidence < kExtentSlideMaxAnswerConfidence &&
-      best.fitness >= kWeakChamferMinFitness && !best.noise_polished && symmetries.empty() &&
-      !revolution.has_value() && !IsDeepPair(source, target, refinement)) {
+  if (options.search_far_valley && inside_weak_move_gates()) {
     if (std::optional<FarValleyMove> moved =
             FarValleyAlongWeakestDirection(source, target, best, SymmetryDepth(source, target))) {
       try_measured_move(moved->T_target_source, "far_valley", /*cap_confidence=*/true);
