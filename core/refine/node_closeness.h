@@ -17,6 +17,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include "Eigen/Geometry"
@@ -63,9 +64,14 @@ std::vector<double> WeightedMeanNodeDistanceCells(const Octree& source, const Oc
 // pose leaves without any partner nearby. A near-twin of the answer (a gear turned by a tooth)
 // fits the rest alike and differs only there, in the few nodes of the feature that breaks the
 // symmetry (symmetry_starts.h). Negative where it cannot be measured (as MeanNodeDistanceCells).
+// `stop_above` (a fraction): a pose's count stops once its far nodes alone exceed that fraction of
+// the sampled nodes, and its entry is then the fraction counted so far (above `stop_above`, at
+// most its own): for a caller that only needs to know which poses stay at or below it (the
+// weak-direction start's steps that can still win).
 std::vector<double> FarNodeFractions(const Octree& source, const Octree& target,
                                      const std::vector<Eigen::Isometry3d>& poses, int depth,
-                                     double far_cells, const NodeClosenessOptions& options = {});
+                                     double far_cells, const NodeClosenessOptions& options = {},
+                                     double stop_above = std::numeric_limits<double>::infinity());
 
 // Per pose: the mean of FarNodeFractions from the source to the target under the pose and from
 // the target to the source under its inverse (a feature a wrong pose misplaces is missed on both
