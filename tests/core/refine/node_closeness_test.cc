@@ -135,6 +135,49 @@ TEST(NodeClosenessTest, FarNodeFractionsEqualASearchOfEveryNode) {
   }
 }
 
+// With stop_above, a pose whose far fraction stays at or below it reads its own fraction bit for
+// bit, and one past it reads a value above stop_above and at most its own (the weak-direction
+// start's way there, which only asks which steps can still win), with and without a mask.
+TEST(NodeClosenessTest, FarNodeFractionsStopAboveKeepsThePosesWithinIt) {
+  auto pair = MakeObjectPair(testing_util::UnseenPairs(DisturbanceKind::kGaussianNoise, 1), 5);
+  ASSERT_TRUE(pair.ok()) << pair.status();
+  const Octree source = RefinementTree(pair->source, kDepth);
+  const Octree target = RefinementTree(pair->target, kDepth);
+  std::vector<Eigen::Isometry3d> poses;
+  for (double deg : {0.0, 2.0, 5.0, 10.0, 20.0, 40.0}) {
+    Eigen::Isometry3d turn = Eigen::Isometry3d::Identity();
+    turn.linear() = Eigen::AngleAxisd(deg * M_PI / 180.0, Eigen::Vector3d::UnitZ()).matrix();
+    poses.push_back(turn * pair->T_target_source);
+  }
+  std::vector<uint8_t> every_other(source.level(kDepth).size(), 0);
+  for (size_t i = 0; i < every_other.size(); i += 2) every_other[i] = 1;
+  NodeClosenessOptions masked;
+  masked.source_nodes = &every_other;
+  for (const NodeClosenessOptions& options : {NodeClosenessOptions{}, masked}) {
+    const std::vector<double> full = FarNodeFractions(source, target, poses, kDepth, 1.5, options);
+    ASSERT_EQ(full.size(), poses.size());
+    ASSERT_GT(full.back(), full.front());  // the turns spread the fractions across the bounds
+    for (double stop_above : {0.0, 0.05, 0.2, 0.5}) {
+      const std::vector<double> got =
+          FarNodeFractions(source, target, poses, kDepth, 1.5, options, stop_above);
+      ASSERT_EQ(got.size(), poses.size());
+      int stopped = 0;
+      for (size_t p = 0; p < poses.size(); ++p) {
+        if (full[p] <= stop_above) {
+          EXPECT_EQ(got[p], full[p]) << "pose " << p << ", stop above " << stop_above;
+        } else {
+          ++stopped;
+          EXPECT_GT(got[p], stop_above) << "pose " << p << ", stop above " << stop_above;
+          EXPECT_LE(got[p], full[p]) << "pose " << p << ", stop above " << stop_above;
+        }
+      }
+      if (stop_above == 0.05) {
+        EXPECT_GT(stopped, 0);
+      }
+    }
+  }
+}
+
 // The exact capped nearest distance, whatever search finds it (the cells' bounding boxes pass
 // over cells that cannot hold a nearer partner): against every target node, with and without a
 // mask of partners, under turns that leave many nodes without one.
