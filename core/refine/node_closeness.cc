@@ -285,6 +285,37 @@ std::vector<double> TwoWayFarNodeFractions(const Octree& source, const Octree& t
   return two_way;
 }
 
+TwoWayFarWithinDrop TwoWayFarNodeFractionsWithinDrop(
+    const Octree& source, const Octree& target, const Eigen::Isometry3d& answer,
+    const std::vector<Eigen::Isometry3d>& candidates, int depth, double far_cells,
+    double min_drop) {
+  TwoWayFarWithinDrop out;
+  out.candidates.assign(candidates.size(), -1.0);
+  const double answer_far = TwoWayFarNodeFractions(source, target, {answer}, depth, far_cells)[0];
+  if (answer_far < 0.0) return out;
+  out.answer = answer_far;
+  const double most = answer_far - min_drop;
+  if (most < 0.0 || candidates.empty()) return out;
+  // 0.5 * there <= most exactly when there <= 2 * most (scaling by two is exact), so the poses
+  // stopped past 2 * most are exactly those left out here.
+  const std::vector<double> there = FarNodeFractions(source, target, candidates, depth, far_cells,
+                                                     NodeClosenessOptions{}, 2.0 * most);
+  std::vector<size_t> contenders;
+  std::vector<Eigen::Isometry3d> inverses;
+  for (size_t k = 0; k < candidates.size(); ++k) {
+    if (there[k] >= 0.0 && 0.5 * there[k] <= most) {
+      contenders.push_back(k);
+      inverses.push_back(candidates[k].inverse());
+    }
+  }
+  if (contenders.empty()) return out;
+  const std::vector<double> back = FarNodeFractions(target, source, inverses, depth, far_cells);
+  for (size_t c = 0; c < contenders.size(); ++c) {
+    if (back[c] >= 0.0) out.candidates[contenders[c]] = 0.5 * (there[contenders[c]] + back[c]);
+  }
+  return out;
+}
+
 std::vector<uint8_t> NodesFarUnderAllButFewPoses(const Octree& source, const Octree& target,
                                                  const std::vector<Eigen::Isometry3d>& poses,
                                                  int depth, double far_cells, int max_near) {

@@ -81,6 +81,23 @@ std::vector<double> TwoWayFarNodeFractions(const Octree& source, const Octree& t
                                            const std::vector<Eigen::Isometry3d>& poses, int depth,
                                            double far_cells);
 
+// An answer's TwoWayFarNodeFractions and its candidates' (steps or twins of the answer), measured
+// only as far as the question "which candidate leaves at least `min_drop` less than the answer,
+// and least" needs. A candidate's two-way fraction is at least half its way there, so one whose
+// way there alone exceeds twice the answer's less the drop cannot qualify: its way there stops
+// counting there (FarNodeFractions' stop_above) and its way back is not measured. `candidates`
+// reads the exact two-way fraction of every candidate that may qualify and -1 for the others;
+// all -1 when the answer, measured first, leaves less than the drop or cannot be measured
+// (`answer` negative then). The least qualifying candidate is the same, bit for bit, as
+// TwoWayFarNodeFractions of every pose would give.
+struct TwoWayFarWithinDrop {
+  double answer = -1.0;
+  std::vector<double> candidates;
+};
+TwoWayFarWithinDrop TwoWayFarNodeFractionsWithinDrop(
+    const Octree& source, const Octree& target, const Eigen::Isometry3d& answer,
+    const std::vector<Eigen::Isometry3d>& candidates, int depth, double far_cells, double min_drop);
+
 // Marks (1) each node of the source's `depth` that lies farther than `far_cells` (below kCapCells)
 // from every target CoM of `depth` under all but at most `max_near` of the poses; every node is
 // visited (no sampling). With the poses a target's near-symmetries, the marked nodes are the

@@ -62,42 +62,16 @@ std::optional<WeakDirectionStart> BestWeakDirectionStart(const Octree& source, c
       poses.push_back(Step(answer, weakest.direction, sign * cells * edge));
     }
   }
-  // TwoWayFarNodeFractions of every pose, measured only as far as it can still matter. A step's
-  // two-way fraction is at least half its way there, so a step whose way there alone exceeds
-  // twice the most it may leave (the answer's less the drop) cannot be the best one that is kept:
-  // its way there stops counting there and its way back is not measured. Nothing is kept when the
-  // answer itself leaves less than the drop, which its two ways, measured first, tell. The same
-  // best step as measuring every pose both ways (bit for bit), for less than half the work.
-  const std::vector<double> answer_there =
-      FarNodeFractions(source, target, {answer.T_target_source}, depth, options.far_cells);
-  if (answer_there.empty() || answer_there[0] < 0.0) return std::nullopt;
-  const std::vector<double> answer_back = FarNodeFractions(
-      target, source, {answer.T_target_source.inverse()}, depth, options.far_cells);
-  if (answer_back.empty() || answer_back[0] < 0.0) return std::nullopt;
-  const double answer_far = 0.5 * (answer_there[0] + answer_back[0]);
-  const double most = answer_far - options.min_far_fraction_drop;
-  if (most < 0.0) return std::nullopt;
+  // The steps measured only as far as the best one that may be kept needs (the same best step as
+  // measuring every pose both ways, bit for bit, for less than half the work).
   const std::vector<Eigen::Isometry3d> stepped(poses.begin() + 1, poses.end());
-  const std::vector<double> stepped_there = FarNodeFractions(
-      source, target, stepped, depth, options.far_cells, NodeClosenessOptions{}, 2.0 * most);
-  std::vector<double> there = answer_there;
-  there.insert(there.end(), stepped_there.begin(), stepped_there.end());
-  std::vector<size_t> contenders;
-  std::vector<Eigen::Isometry3d> inverses;
-  for (size_t k = 1; k < poses.size(); ++k) {
-    if (there[k] >= 0.0 && 0.5 * there[k] <= most) {
-      contenders.push_back(k);
-      inverses.push_back(poses[k].inverse());
-    }
-  }
-  if (contenders.empty()) return std::nullopt;
-  const std::vector<double> back =
-      FarNodeFractions(target, source, inverses, depth, options.far_cells);
-  std::vector<double> far(poses.size(), -1.0);
-  far[0] = answer_far;
-  for (size_t c = 0; c < contenders.size(); ++c) {
-    if (back[c] >= 0.0) far[contenders[c]] = 0.5 * (there[contenders[c]] + back[c]);
-  }
+  const TwoWayFarWithinDrop measured =
+      TwoWayFarNodeFractionsWithinDrop(source, target, answer.T_target_source, stepped, depth,
+                                       options.far_cells, options.min_far_fraction_drop);
+  if (measured.answer < 0.0) return std::nullopt;
+  const double most = measured.answer - options.min_far_fraction_drop;
+  std::vector<double> far = {measured.answer};
+  far.insert(far.end(), measured.candidates.begin(), measured.candidates.end());
   int best = -1;
   for (size_t k = 1; k < far.size(); ++k) {
     if (far[k] >= 0.0 && (best < 0 || far[k] < far[best])) best = static_cast<int>(k);

@@ -178,6 +178,59 @@ TEST(NodeClosenessTest, FarNodeFractionsStopAboveKeepsThePosesWithinIt) {
   }
 }
 
+// TwoWayFarNodeFractionsWithinDrop against TwoWayFarNodeFractions of every pose: the answer's
+// fraction the same, each candidate that may leave at least the drop less than the answer its own
+// fraction bit for bit, the others unmeasured, so that the least qualifying candidate is the same;
+// and nothing measured when the drop exceeds what the answer leaves.
+TEST(NodeClosenessTest, TwoWayFarWithinDropKeepsTheCandidatesThatMayQualify) {
+  auto pair = MakeObjectPair(testing_util::UnseenPairs(DisturbanceKind::kGaussianNoise, 1), 5);
+  ASSERT_TRUE(pair.ok()) << pair.status();
+  const Octree source = RefinementTree(pair->source, kDepth);
+  const Octree target = RefinementTree(pair->target, kDepth);
+  // The answer 3 degrees off the truth; candidates turned back to it and far beyond.
+  auto turned = [&](double deg) {
+    Eigen::Isometry3d turn = Eigen::Isometry3d::Identity();
+    turn.linear() = Eigen::AngleAxisd(deg * M_PI / 180.0, Eigen::Vector3d::UnitY()).matrix();
+    return turn * pair->T_target_source;
+  };
+  const Eigen::Isometry3d answer = turned(3.0);
+  std::vector<Eigen::Isometry3d> candidates;
+  for (double deg : {40.0, 15.0, 6.0, 0.0, -1.5, -25.0}) candidates.push_back(turned(deg));
+  std::vector<Eigen::Isometry3d> every = {answer};
+  every.insert(every.end(), candidates.begin(), candidates.end());
+  const std::vector<double> full = TwoWayFarNodeFractions(source, target, every, kDepth, 1.5);
+  for (double drop : {0.0, 0.01, 0.05}) {
+    const TwoWayFarWithinDrop got =
+        TwoWayFarNodeFractionsWithinDrop(source, target, answer, candidates, kDepth, 1.5, drop);
+    EXPECT_EQ(got.answer, full[0]);
+    ASSERT_EQ(got.candidates.size(), candidates.size());
+    const double most = full[0] - drop;
+    int least_full = -1, least_got = -1, measured = 0;
+    for (size_t k = 0; k < candidates.size(); ++k) {
+      const double f = full[k + 1];
+      if (f <= most && (least_full < 0 || f < full[least_full + 1]))
+        least_full = static_cast<int>(k);
+      const double g = got.candidates[k];
+      if (g >= 0.0) {
+        ++measured;
+        EXPECT_EQ(g, f) << "candidate " << k << ", drop " << drop;
+        if (least_got < 0 || g < got.candidates[least_got]) least_got = static_cast<int>(k);
+      } else {
+        EXPECT_GT(f, most) << "candidate " << k << " left out, drop " << drop;
+      }
+    }
+    if (least_got >= 0 && got.candidates[least_got] > most) least_got = -1;
+    EXPECT_EQ(least_got, least_full) << "drop " << drop;
+    EXPECT_GE(least_full, 0) << "the candidates at the truth leave fewer nodes far, drop " << drop;
+    // Candidates 40 and -25 degrees off cannot qualify and are left unmeasured.
+    EXPECT_LT(measured, static_cast<int>(candidates.size())) << "drop " << drop;
+  }
+  const TwoWayFarWithinDrop none = TwoWayFarNodeFractionsWithinDrop(
+      source, target, answer, candidates, kDepth, 1.5, full[0] + 0.01);
+  EXPECT_EQ(none.answer, full[0]);
+  for (double g : none.candidates) EXPECT_LT(g, 0.0);
+}
+
 // The exact capped nearest distance, whatever search finds it (the cells' bounding boxes pass
 // over cells that cannot hold a nearer partner): against every target node, with and without a
 // mask of partners, under turns that leave many nodes without one.
