@@ -214,8 +214,11 @@ std::optional<ContinuousSymmetry> RoundAboutLine(const Octree& target, const Tur
     (4 * k % steps == 0 ? first : rest).push_back(turn);
   }
   double most = 0.0;
+  // A turn's count stops once it passes the bound (FarNodeFractions' stop_above): past it, the
+  // target is not round about the line whatever the count would have been.
   auto round_under = [&](const std::vector<Eigen::Isometry3d>& turns) {
-    for (double f : FarNodeFractions(target, target, turns, depth, options.far_cells)) {
+    for (double f : FarNodeFractions(target, target, turns, depth, options.far_cells,
+                                     NodeClosenessOptions{}, options.max_continuous_far_fraction)) {
       most = f < 0.0 ? 1.0 : std::max(most, f);  // unmeasured: not shown round
     }
     return most <= options.max_continuous_far_fraction;
