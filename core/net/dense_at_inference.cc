@@ -1,5 +1,6 @@
 #include "core/net/dense_at_inference.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <vector>
@@ -32,6 +33,121 @@ torch::Tensor DenseByKernel(const torch::Tensor& x, const torch::Tensor& weight_
   return y;
 }
 
+// The same through the BLAS (SgemmRowMajor) where rpsr's AVX2 kernel is not chosen (OpenBLAS's
+// AVX-512 kernels): rows x [rows, in] (row stride in) times rows [row, row + out) of weight
+// [*, in] (contiguous) transposed, plus bias[row, row + out): the bias copied into the output and
+// added by the GEMM (beta 1), as torch::addmm computes a Linear.
+torch::Tensor DenseByBlas(const float* x, int64_t rows, int64_t in, const torch::Tensor& weight,
+                          int64_t row, int64_t out, const torch::Tensor& bias,
+                          const torch::TensorOptions& options) {
+  torch::Tensor y = torch::empty({rows, out}, options);
+  float* yp = y.data_ptr<float>();
+  float beta = 0.0f;
+  if (bias.defined()) {
+    const torch::Tensor b = bias.detach().contiguous();
+    const float* bp = b.data_ptr<float>() + row;
+    for (int64_t r = 0; r < rows; ++r) std::copy(bp, bp + out, yp + r * out);
+    beta = 1.0f;
+  }
+  SgemmRowMajor(/*trans_a=*/false, /*trans_b=*/true, rows, out, in, 1.0f, x, in,
+                weight.data_ptr<float>() + row * in, in, beta, yp, out);
+  return y;
+}
+
+// Whether DenseByBlas serves `x` and an [out, in] weight: CPU float32 inference, a BLAS sgemm_.
+bool DenseByBlasAvailable(const torch::Tensor& x, const torch::Tensor& weight) {
+  return UseInferenceKernels(x) && UseInferenceKernels(weight) && weight.dim() == 2 &&
+         x.dim() >= 1 && x.size(-1) == weight.size(1) && SparseTreeConvAvailable();
+}
+
+// MultiheadAttentionAtInference through the BLAS: each projection one GEMM (the three of a
+// self-attention one), each head's scores and weighted values one GEMM on the projections' rows
+// in place, the padding mask written into the scores, and one softmax over all heads' rows.
+// LibTorch's multi_head_attention_forward (C++ API) took ~0.33 ms an object pair's call on
+// 2-core AMD EPYC with AVX-512, of which its GEMMs ~0.1: the rest was some 25 operators' views,
+// copies, equality tests of query and key, dispatch and allocations on 64 tokens.
+torch::Tensor AttentionByBlas(torch::nn::MultiheadAttentionImpl& attention,
+                              const torch::Tensor& query, const torch::Tensor& key_value,
+                              const torch::Tensor& key_padding_mask) {
+  const int64_t e = attention.options.embed_dim();
+  const int64_t heads = attention.options.num_heads();
+  const int64_t head_dim = e / heads;
+  const int64_t tq = query.size(0), tk = key_value.size(0), batch = query.size(1);
+  const torch::Tensor weight = attention.in_proj_weight.detach().contiguous();  // [3E, E]
+  const torch::Tensor& in_bias = attention.in_proj_bias;
+  const torch::Tensor qc = query.contiguous();
+  const bool self = query.is_same(key_value);
+  const torch::Tensor kvc = self ? qc : key_value.contiguous();
+  // Rows t * batch + b of each projection; a self-attention's three in one [T B, 3E].
+  torch::Tensor q_rows, kv_rows;
+  int64_t ldq, ldkv;
+  const float* q;
+  const float* k;
+  const float* v;
+  if (self) {
+    q_rows =
+        DenseByBlas(qc.data_ptr<float>(), tq * batch, e, weight, 0, 3 * e, in_bias, qc.options());
+    ldq = ldkv = 3 * e;
+    q = q_rows.data_ptr<float>();
+    k = q + e;
+    v = q + 2 * e;
+  } else {
+    q_rows = DenseByBlas(qc.data_ptr<float>(), tq * batch, e, weight, 0, e, in_bias, qc.options());
+    kv_rows =
+        DenseByBlas(kvc.data_ptr<float>(), tk * batch, e, weight, e, 2 * e, in_bias, kvc.options());
+    ldq = e;
+    ldkv = 2 * e;
+    q = q_rows.data_ptr<float>();
+    k = kv_rows.data_ptr<float>();
+    v = k + e;
+  }
+  // The queries scaled by head_dim^-1/2 as LibTorch scales them: each projected value times the
+  // factor in float (a float tensor times a double scalar), not the scores, so the same values
+  // bit for bit.
+  const float scaling = static_cast<float>(1.0 / std::sqrt(static_cast<double>(head_dim)));
+  float* qw = q_rows.data_ptr<float>();
+  for (int64_t r = 0; r < tq * batch; ++r) {
+    for (int64_t c = 0; c < e; ++c) qw[r * ldq + c] *= scaling;
+  }
+  // Scores [batch, heads, tq, tk].
+  torch::Tensor scores = torch::empty({batch * heads * tq, tk}, qc.options());
+  float* sp = scores.data_ptr<float>();
+  for (int64_t b = 0; b < batch; ++b) {
+    for (int64_t h = 0; h < heads; ++h) {
+      SgemmRowMajor(false, true, tq, tk, head_dim, 1.0f, q + b * ldq + h * head_dim, batch * ldq,
+                    k + b * ldkv + h * head_dim, batch * ldkv, 0.0f, sp + (b * heads + h) * tq * tk,
+                    tk);
+    }
+  }
+  if (key_padding_mask.defined()) {
+    const torch::Tensor mask = key_padding_mask.to(torch::kBool).contiguous();
+    const bool* mp = mask.data_ptr<bool>();
+    constexpr float kMinusInf = -std::numeric_limits<float>::infinity();
+    for (int64_t b = 0; b < batch; ++b) {
+      for (int64_t j = 0; j < tk; ++j) {
+        if (!mp[b * tk + j]) continue;
+        for (int64_t row = b * heads * tq; row < (b + 1) * heads * tq; ++row)
+          sp[row * tk + j] = kMinusInf;
+      }
+    }
+  }
+  const torch::Tensor weights = torch::softmax(scores, -1).contiguous();
+  const float* wp = weights.data_ptr<float>();
+  // The heads' weighted values side by side: rows t * batch + b, columns h * head_dim.
+  torch::Tensor attended = torch::empty({tq * batch, e}, qc.options());
+  float* ap = attended.data_ptr<float>();
+  for (int64_t b = 0; b < batch; ++b) {
+    for (int64_t h = 0; h < heads; ++h) {
+      SgemmRowMajor(false, false, tq, head_dim, tk, 1.0f, wp + (b * heads + h) * tq * tk, tk,
+                    v + b * ldkv + h * head_dim, batch * ldkv, 0.0f, ap + b * e + h * head_dim,
+                    batch * e);
+    }
+  }
+  const torch::Tensor out_weight = attention.out_proj->weight.detach().contiguous();
+  return DenseByBlas(ap, tq * batch, e, out_weight, 0, e, attention.out_proj->bias, qc.options())
+      .view({tq, batch, e});
+}
+
 std::vector<int64_t> WithLast(torch::IntArrayRef sizes, int64_t last) {
   std::vector<int64_t> out(sizes.begin(), sizes.end());
   out.back() = last;
@@ -47,7 +163,16 @@ bool DenseAtInferenceAvailable(const torch::Tensor& x, const torch::Tensor& weig
 
 torch::Tensor LinearAtInference(const torch::Tensor& x, torch::nn::LinearImpl& linear,
                                 TransposedWeightCache& weight_t) {
-  if (!DenseAtInferenceAvailable(x, linear.weight)) return linear.forward(x);
+  if (!DenseAtInferenceAvailable(x, linear.weight)) {
+    if (!DenseByBlasAvailable(x, linear.weight)) return linear.forward(x);
+    const int64_t out = linear.weight.size(0);
+    const int64_t in = linear.weight.size(1);
+    const torch::Tensor xc = x.contiguous();
+    const torch::Tensor weight = linear.weight.detach().contiguous();
+    return DenseByBlas(xc.data_ptr<float>(), xc.numel() / std::max<int64_t>(in, 1), in, weight, 0,
+                       out, linear.bias, xc.options())
+        .view(WithLast(x.sizes(), out));
+  }
   const int64_t out = linear.weight.size(0);
   const torch::Tensor xc = x.contiguous();
   return DenseByKernel(xc, weight_t.Of(linear.weight), 0, out, linear.bias)
@@ -61,13 +186,18 @@ torch::Tensor MultiheadAttentionAtInference(torch::nn::MultiheadAttentionImpl& a
                                             AttentionWeightsT& weights_t) {
   const auto& o = attention.options;
   const int64_t e = o.embed_dim();
-  const bool usable = !attention.is_training() && attention._qkv_same_embed_dim &&
-                      !attention.bias_k.defined() && !attention.bias_v.defined() &&
-                      !o.add_zero_attn() && query.dim() == 3 && key_value.dim() == 3 &&
-                      key_value.size(2) == e && query.size(1) == key_value.size(1) &&
-                      DenseAtInferenceAvailable(query, attention.in_proj_weight) &&
-                      DenseAtInferenceAvailable(query, attention.out_proj->weight);
-  if (!usable) {
+  const bool plain = !attention.is_training() && attention._qkv_same_embed_dim &&
+                     !attention.bias_k.defined() && !attention.bias_v.defined() &&
+                     !o.add_zero_attn() && query.dim() == 3 && key_value.dim() == 3 &&
+                     key_value.size(2) == e && query.size(1) == key_value.size(1) &&
+                     UseInferenceKernels(key_value);
+  const bool by_kernel = plain && DenseAtInferenceAvailable(query, attention.in_proj_weight) &&
+                         DenseAtInferenceAvailable(query, attention.out_proj->weight);
+  if (!by_kernel) {
+    if (plain && DenseByBlasAvailable(query, attention.in_proj_weight) &&
+        DenseByBlasAvailable(query, attention.out_proj->weight)) {
+      return AttentionByBlas(attention, query, key_value, key_padding_mask);
+    }
     return std::get<0>(
         attention.forward(query, key_value, key_value, key_padding_mask, /*need_weights=*/false));
   }

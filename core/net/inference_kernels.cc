@@ -125,6 +125,19 @@ void MultiplyByOffsetBlock(const float* a, int64_t rows, int64_t channels, Offse
 
 bool SparseTreeConvAvailable() { return Sgemm() != nullptr; }
 
+void SgemmRowMajor(bool trans_a, bool trans_b, int64_t m, int64_t n, int64_t k, float alpha,
+                   const float* a, int64_t lda, const float* b, int64_t ldb, float beta, float* c,
+                   int64_t ldc) {
+  TORCH_CHECK(SparseTreeConvAvailable(), "no sgemm_ in the loaded BLAS");
+  if (m <= 0 || n <= 0) return;
+  // Row-major c = op(a) op(b) is column-major c^T = op(b)^T op(a)^T: b's storage read as
+  // column-major is b^T, so op(b)^T is b^T as stored ('N') unless b is transposed ('T').
+  const int cm = static_cast<int>(n), cn = static_cast<int>(m), ck = static_cast<int>(k);
+  const int la = static_cast<int>(lda), lb = static_cast<int>(ldb), lc = static_cast<int>(ldc);
+  Sgemm()(trans_b ? "T" : "N", trans_a ? "T" : "N", &cm, &cn, &ck, &alpha, b, &lb, a, &la, &beta, c,
+          &lc);
+}
+
 namespace {
 
 // out's rows = in's rows `rows[0 .. n)`, of kChannels floats, or of `channels` when kChannels is

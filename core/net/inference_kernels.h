@@ -73,6 +73,14 @@ class TransposedWeightCache {
 // False when the loaded BLAS exports no Fortran sgemm_ (SparseTreeConvLinear then throws).
 bool SparseTreeConvAvailable();
 
+// c (m x n, row-major, leading dimension ldc) = alpha op(a) op(b) + beta c, with op(a) m x k and
+// op(b) k x n, each row-major as stored (transposed when trans_*): the loaded BLAS's Fortran
+// sgemm_ on the transposed, column-major problem, the call torch::addmm makes for a Linear
+// (a [rows, in] times weight [out, in] transposed). Only where SparseTreeConvAvailable().
+void SgemmRowMajor(bool trans_a, bool trans_b, int64_t m, int64_t n, int64_t k, float alpha,
+                   const float* a, int64_t lda, const float* b, int64_t ldb, float beta, float* c,
+                   int64_t ldc);
+
 // out[p] = max over the 8 slots of features[slots[p, k]], a slot equal to features.size(0)
 // counting as a zero row. features [N, C] float, slots [P, 8] int64; returns [P, C].
 torch::Tensor MaxOverSlots(const torch::Tensor& features, const torch::Tensor& slots);
