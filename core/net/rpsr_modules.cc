@@ -126,6 +126,21 @@ torch::Tensor TreeConvImpl::forward(const torch::Tensor& features, const torch::
                                             row_offsets, weight_by_offset_.Of(linear_->weight))));
   }
   const int64_t rows = neighbors.size(0);
+  if (UseInferenceKernels(features) && UseInferenceKernels(linear_->weight) &&
+      SmallChannelConvAvailable(in_channels_, linear_->weight.size(0))) {
+    // The gather and the GEMM in one pass over the present neighbours (rulebook_kernel.h).
+    const torch::Tensor x = features.contiguous();
+    const torch::Tensor nbr = neighbors.contiguous().to(torch::kInt64);
+    const torch::Tensor weight_t = weight_by_offset_.Of(linear_->weight);  // [27 C, width]
+    const int64_t width = linear_->weight.size(0);
+    torch::Tensor out = torch::empty({rows, width}, x.options());
+    const torch::Tensor bias =
+        linear_->bias.defined() ? linear_->bias.detach().contiguous() : torch::Tensor();
+    SmallChannelConvRows(x.data_ptr<float>(), in_channels_, nbr.data_ptr<int64_t>(), rows,
+                         x.size(0), weight_t.data_ptr<float>(), width,
+                         bias.defined() ? bias.data_ptr<float>() : nullptr, out.data_ptr<float>());
+    return torch::relu(norm_->forward(out));
+  }
   torch::Tensor gathered = UseInferenceKernels(features)
                                ? GatherRowsOrZero(features, neighbors)
                                : WithZeroRow(features).index_select(0, neighbors.reshape({-1}));

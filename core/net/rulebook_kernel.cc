@@ -116,9 +116,64 @@ void DenseAddProducts(const float* in, int64_t channels, int64_t n, const float*
   });
 }
 
+namespace {
+
+// SmallChannelConvRows for kVectors x 8 output channels: each output row's sums in kVectors
+// registers, the neighbours' few input values broadcast.
+template <int kVectors>
+void SmallChannelConvRowsOf(const float* in, int64_t channels, const int64_t* neighbors,
+                            int64_t rows, int64_t empty, const float* weight_t, const float* bias,
+                            float* out) {
+  constexpr int64_t kWidth = 8 * kVectors;
+  for (int64_t i = 0; i < rows; ++i) {
+    __m256 acc[kVectors];
+    for (int v = 0; v < kVectors; ++v) acc[v] = _mm256_setzero_ps();
+    const int64_t* nbr = neighbors + i * 27;
+    for (int k = 0; k < 27; ++k) {
+      const int64_t j = nbr[k];
+      if (j == empty) continue;  // a zero row adds nothing to the sums
+      const float* x = in + j * channels;
+      const float* w = weight_t + k * channels * kWidth;
+      for (int64_t c = 0; c < channels; ++c, w += kWidth) {
+        const __m256 xv = _mm256_broadcast_ss(x + c);
+        for (int v = 0; v < kVectors; ++v) {
+          acc[v] = _mm256_fmadd_ps(xv, _mm256_loadu_ps(w + 8 * v), acc[v]);
+        }
+      }
+    }
+    float* o = out + i * kWidth;
+    for (int v = 0; v < kVectors; ++v) {
+      const __m256 b = bias != nullptr ? _mm256_loadu_ps(bias + 8 * v) : _mm256_setzero_ps();
+      _mm256_storeu_ps(o + 8 * v, _mm256_add_ps(acc[v], b));
+    }
+  }
+}
+
+}  // namespace
+
+void SmallChannelConvRows(const float* in, int64_t channels, const int64_t* neighbors, int64_t rows,
+                          int64_t empty, const float* weight_t, int64_t width, const float* bias,
+                          float* out) {
+  switch (width) {
+    case 16:
+      return SmallChannelConvRowsOf<2>(in, channels, neighbors, rows, empty, weight_t, bias, out);
+    case 32:
+      return SmallChannelConvRowsOf<4>(in, channels, neighbors, rows, empty, weight_t, bias, out);
+    case 64:
+      return SmallChannelConvRowsOf<8>(in, channels, neighbors, rows, empty, weight_t, bias, out);
+    default:
+      break;
+  }
+}
+
 #pragma GCC pop_options
 
 bool RulebookKernelSupported() { return CpuHasAvx2Fma(); }
+
+bool SmallChannelConvAvailable(int64_t channels, int64_t width) {
+  return CpuHasAvx2Fma() && kernel_use.load(std::memory_order_relaxed) != RulebookKernelUse::kOff &&
+         channels >= 1 && channels <= 8 && (width == 16 || width == 32 || width == 64);
+}
 
 bool AutoChoosesRulebookKernel(bool cpu_has_avx2_fma, const char* openblas_core) {
   if (!cpu_has_avx2_fma) return false;

@@ -57,6 +57,22 @@ void RulebookAddProducts(const float* in, int64_t channels, const int32_t* in_ro
                          const int32_t* out_rows, int64_t n, const float* block, int64_t width,
                          float* out);
 
+// A tree convolution of few input channels (the depth-5 inputs: 1 and 6) in one pass, for the
+// BLAS path's hosts, where it is otherwise a gather of each node's 27 neighbour rows into a
+// [rows, 27 C] matrix (a zero row for an empty neighbour) and a GEMM: out[i] (`width` floats) =
+// the sum over k < 27 with neighbors[i, k] != `empty` and c < channels of in[neighbors[i, k], c]
+// times weight_t[k C + c] (row-major [27 C, width], the Linear's weight transposed), in that
+// order, one rounding per fused multiply-add from zero, then plus bias (or nothing when null):
+// the order OpenBLAS's AVX-512 kernel sums the GEMM in, with the bias added as torch::addmm adds
+// it. Requires SmallChannelConvAvailable(channels, width).
+void SmallChannelConvRows(const float* in, int64_t channels, const int64_t* neighbors, int64_t rows,
+                          int64_t empty, const float* weight_t, int64_t width, const float* bias,
+                          float* out);
+
+// Whether SmallChannelConvRows runs here: AVX2 and FMA, the kernel not turned off
+// (SetRulebookKernelUse(kOff)), 1-8 channels in and 16, 32 or 64 out.
+bool SmallChannelConvAvailable(int64_t channels, int64_t width);
+
 }  // namespace rpsr::core::net
 
 #endif  // RPSR_CORE_NET_RULEBOOK_KERNEL_H_

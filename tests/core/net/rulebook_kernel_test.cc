@@ -93,6 +93,41 @@ TEST(RulebookKernelTest, AddsWhatADoubleLoopAddsForEveryTailOfItsRowGroups) {
   }
 }
 
+// The few-channel convolution in one pass equals the gathered rows times the Linear's weight (the
+// path it replaces on the BLAS hosts) within float rounding, for the depth-5 inputs' 1 and 6
+// channels and each width it takes, with and without a bias, and it steps aside where it cannot.
+TEST(RulebookKernelTest, SmallChannelConvolutionEqualsTheGatheredLinear) {
+  if (!RulebookKernelSupported()) GTEST_SKIP() << "no AVX2 and FMA on this CPU";
+  torch::NoGradGuard no_grad;
+  for (const int64_t channels : {1, 6}) {
+    for (const int64_t width : {16, 32, 64}) {
+      for (const bool with_bias : {true, false}) {
+        const int64_t rows = 157;
+        torch::manual_seed(31 + channels + width);
+        const torch::Tensor x = torch::randn({rows, channels});
+        const torch::Tensor nbr = SameDepthNeighbours(rows, 37 + width);
+        torch::nn::Linear linear(torch::nn::LinearOptions(27 * channels, width).bias(with_bias));
+        const torch::Tensor expected =
+            linear->forward(GatherRowsOrZero(x, nbr).reshape({rows, -1}));
+        ASSERT_TRUE(SmallChannelConvAvailable(channels, width));
+        const torch::Tensor weight_t = linear->weight.t().contiguous();
+        torch::Tensor got = torch::empty({rows, width});
+        SmallChannelConvRows(x.data_ptr<float>(), channels, nbr.data_ptr<int64_t>(), rows, rows,
+                             weight_t.data_ptr<float>(), width,
+                             with_bias ? linear->bias.data_ptr<float>() : nullptr,
+                             got.data_ptr<float>());
+        EXPECT_TRUE(torch::allclose(got, expected, 1e-5, 1e-5))
+            << channels << " channels, width " << width << (with_bias ? ", bias" : "")
+            << ": largest difference " << (got - expected).abs().max().item<float>();
+      }
+    }
+  }
+  EXPECT_FALSE(SmallChannelConvAvailable(16, 32));
+  EXPECT_FALSE(SmallChannelConvAvailable(6, 48));
+  const KernelUse off(RulebookKernelUse::kOff);
+  EXPECT_FALSE(SmallChannelConvAvailable(6, 32));
+}
+
 TEST(RulebookKernelTest, TreeConvolutionEqualsTheBlasPath) {
   if (!RulebookKernelSupported()) GTEST_SKIP() << "no AVX2 and FMA on this CPU";
   if (!SparseTreeConvAvailable()) GTEST_SKIP() << "the loaded BLAS exports no sgemm_";
