@@ -65,7 +65,9 @@ bool DenseByBlasAvailable(const torch::Tensor& x, const torch::Tensor& weight) {
 // in place, the padding mask written into the scores, and one softmax over all heads' rows.
 // LibTorch's multi_head_attention_forward (C++ API) took ~0.33 ms an object pair's call on
 // 2-core AMD EPYC with AVX-512, of which its GEMMs ~0.1: the rest was some 25 operators' views,
-// copies, equality tests of query and key, dispatch and allocations on 64 tokens.
+// copies, equality tests of query and key, dispatch and allocations on 64 tokens. The same values
+// bit for bit there for the network's shapes (64 tokens); LibTorch's bmm takes a plain loop below
+// 400 products (tq tk head_dim), where the two agree within rounding only.
 torch::Tensor AttentionByBlas(torch::nn::MultiheadAttentionImpl& attention,
                               const torch::Tensor& query, const torch::Tensor& key_value,
                               const torch::Tensor& key_padding_mask) {
@@ -76,6 +78,9 @@ torch::Tensor AttentionByBlas(torch::nn::MultiheadAttentionImpl& attention,
   const torch::Tensor weight = attention.in_proj_weight.detach().contiguous();  // [3E, E]
   const torch::Tensor& in_bias = attention.in_proj_bias;
   const torch::Tensor qc = query.contiguous();
+  // A self-attention is the same tensor passed twice (as the Transformer passes it); LibTorch
+  // tests equal values instead, so two equal but distinct tensors take two GEMMs here where it
+  // takes one (the same values within rounding, not bit for bit).
   const bool self = query.is_same(key_value);
   const torch::Tensor kvc = self ? qc : key_value.contiguous();
   // Rows t * batch + b of each projection; a self-attention's three in one [T B, 3E].
@@ -120,6 +125,12 @@ torch::Tensor AttentionByBlas(torch::nn::MultiheadAttentionImpl& attention,
     }
   }
   if (key_padding_mask.defined()) {
+    TORCH_CHECK(key_padding_mask.dim() == 2 && key_padding_mask.size(0) == batch &&
+                    key_padding_mask.size(1) == tk,
+                "key_padding_mask must be [batch, keys] = [", batch, ", ", tk, "]");
+    TORCH_CHECK(key_padding_mask.scalar_type() == torch::kBool ||
+                    key_padding_mask.scalar_type() == torch::kUInt8,
+                "key_padding_mask must be bool (or uint8), as the module's masked_fill wants");
     const torch::Tensor mask = key_padding_mask.to(torch::kBool).contiguous();
     const bool* mp = mask.data_ptr<bool>();
     constexpr float kMinusInf = -std::numeric_limits<float>::infinity();

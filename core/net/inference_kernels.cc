@@ -133,7 +133,10 @@ void SgemmRowMajor(bool trans_a, bool trans_b, int64_t m, int64_t n, int64_t k, 
   // Row-major c = op(a) op(b) is column-major c^T = op(b)^T op(a)^T: b's storage read as
   // column-major is b^T, so op(b)^T is b^T as stored ('N') unless b is transposed ('T').
   const int cm = static_cast<int>(n), cn = static_cast<int>(m), ck = static_cast<int>(k);
-  const int la = static_cast<int>(lda), lb = static_cast<int>(ldb), lc = static_cast<int>(ldc);
+  // BLAS refuses a leading dimension below 1 even where nothing is read (k = 0: c = beta c).
+  const int la = static_cast<int>(std::max<int64_t>(1, lda));
+  const int lb = static_cast<int>(std::max<int64_t>(1, ldb));
+  const int lc = static_cast<int>(std::max<int64_t>(1, ldc));
   Sgemm()(trans_b ? "T" : "N", trans_a ? "T" : "N", &cm, &cn, &ck, &alpha, b, &lb, a, &la, &beta, c,
           &lc);
 }

@@ -129,16 +129,26 @@ torch::Tensor TreeConvImpl::forward(const torch::Tensor& features, const torch::
   if (UseInferenceKernels(features) && UseInferenceKernels(linear_->weight) &&
       SmallChannelConvAvailable(in_channels_, linear_->weight.size(0))) {
     // The gather and the GEMM in one pass over the present neighbours (rulebook_kernel.h).
+    TORCH_CHECK(features.dim() == 2 && features.size(1) == in_channels_ && neighbors.dim() == 2 &&
+                    neighbors.size(1) == 27,
+                "features must be [N, ", in_channels_, "], neighbors [M, 27]");
     const torch::Tensor x = features.contiguous();
     const torch::Tensor nbr = neighbors.contiguous().to(torch::kInt64);
+    const int64_t* idx = nbr.data_ptr<int64_t>();
+    for (int64_t i = 0; i < nbr.numel(); ++i) {  // as GatherRowsOrZero checks them
+      TORCH_CHECK(idx[i] >= 0 && idx[i] <= x.size(0), "neighbour index ", idx[i], " outside [0, ",
+                  x.size(0), "]");
+    }
     const torch::Tensor weight_t = weight_by_offset_.Of(linear_->weight);  // [27 C, width]
     const int64_t width = linear_->weight.size(0);
     torch::Tensor out = torch::empty({rows, width}, x.options());
     const torch::Tensor bias =
         linear_->bias.defined() ? linear_->bias.detach().contiguous() : torch::Tensor();
-    SmallChannelConvRows(x.data_ptr<float>(), in_channels_, nbr.data_ptr<int64_t>(), rows,
-                         x.size(0), weight_t.data_ptr<float>(), width,
-                         bias.defined() ? bias.data_ptr<float>() : nullptr, out.data_ptr<float>());
+    TORCH_CHECK(SmallChannelConvRows(x.data_ptr<float>(), in_channels_, idx, rows, x.size(0),
+                                     weight_t.data_ptr<float>(), width,
+                                     bias.defined() ? bias.data_ptr<float>() : nullptr,
+                                     out.data_ptr<float>()),
+                "no few-channel convolution for ", width, " output channels");
     return torch::relu(norm_->forward(out));
   }
   torch::Tensor gathered = UseInferenceKernels(features)

@@ -151,18 +151,21 @@ void SmallChannelConvRowsOf(const float* in, int64_t channels, const int64_t* ne
 
 }  // namespace
 
-void SmallChannelConvRows(const float* in, int64_t channels, const int64_t* neighbors, int64_t rows,
+bool SmallChannelConvRows(const float* in, int64_t channels, const int64_t* neighbors, int64_t rows,
                           int64_t empty, const float* weight_t, int64_t width, const float* bias,
                           float* out) {
   switch (width) {
     case 16:
-      return SmallChannelConvRowsOf<2>(in, channels, neighbors, rows, empty, weight_t, bias, out);
+      SmallChannelConvRowsOf<2>(in, channels, neighbors, rows, empty, weight_t, bias, out);
+      return true;
     case 32:
-      return SmallChannelConvRowsOf<4>(in, channels, neighbors, rows, empty, weight_t, bias, out);
+      SmallChannelConvRowsOf<4>(in, channels, neighbors, rows, empty, weight_t, bias, out);
+      return true;
     case 64:
-      return SmallChannelConvRowsOf<8>(in, channels, neighbors, rows, empty, weight_t, bias, out);
+      SmallChannelConvRowsOf<8>(in, channels, neighbors, rows, empty, weight_t, bias, out);
+      return true;
     default:
-      break;
+      return false;
   }
 }
 

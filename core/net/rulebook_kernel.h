@@ -63,9 +63,11 @@ void RulebookAddProducts(const float* in, int64_t channels, const int32_t* in_ro
 // the sum over k < 27 with neighbors[i, k] != `empty` and c < channels of in[neighbors[i, k], c]
 // times weight_t[k C + c] (row-major [27 C, width], the Linear's weight transposed), in that
 // order, one rounding per fused multiply-add from zero, then plus bias (or nothing when null):
-// the order OpenBLAS's AVX-512 kernel sums the GEMM in, with the bias added as torch::addmm adds
-// it. Requires SmallChannelConvAvailable(channels, width).
-void SmallChannelConvRows(const float* in, int64_t channels, const int64_t* neighbors, int64_t rows,
+// the order OpenBLAS's AVX-512 (Cooperlake) kernel sums that GEMM in on session 43's host, with
+// the bias added as torch::addmm adds it, so the same values there; elsewhere within rounding.
+// Neighbour indices must lie in [0, empty]. Requires SmallChannelConvAvailable(channels, width);
+// false (nothing written) for another width.
+bool SmallChannelConvRows(const float* in, int64_t channels, const int64_t* neighbors, int64_t rows,
                           int64_t empty, const float* weight_t, int64_t width, const float* bias,
                           float* out);
 

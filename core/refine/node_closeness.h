@@ -66,8 +66,9 @@ std::vector<double> WeightedMeanNodeDistanceCells(const Octree& source, const Oc
 // symmetry (symmetry_starts.h). Negative where it cannot be measured (as MeanNodeDistanceCells).
 // `stop_above` (a fraction): a pose's count stops once its far nodes alone exceed that fraction of
 // the sampled nodes, and its entry is then the fraction counted so far (above `stop_above`, at
-// most its own): for a caller that only needs to know which poses stay at or below it (the
-// weak-direction start's steps that can still win).
+// most its own): for a caller that only needs to know which poses stay at or below it
+// (TwoWayFarNodeFractionsWithinDrop's candidates that can still qualify, the body-of-revolution
+// test's turns).
 std::vector<double> FarNodeFractions(const Octree& source, const Octree& target,
                                      const std::vector<Eigen::Isometry3d>& poses, int depth,
                                      double far_cells, const NodeClosenessOptions& options = {},

@@ -116,6 +116,13 @@ TEST(DenseAtInferenceTest, WithoutTheKernelTheBlasGivesTheModulesValues) {
       MultiheadAttentionAtInference(*attention, c.query.narrow(1, 1, 1),
                                     c.key_value.narrow(0, 0, 8).narrow(1, 1, 1), {}, weights_t);
   EXPECT_TRUE(torch::allclose(masked.narrow(1, 1, 1), first_half, 1e-5, 1e-5));
+  // A mask of the wrong shape or type is refused, as the module refuses it, not read past its end.
+  EXPECT_THROW(MultiheadAttentionAtInference(*attention, c.query, c.key_value, c.mask.select(0, 1),
+                                             weights_t),
+               c10::Error);
+  EXPECT_THROW(MultiheadAttentionAtInference(*attention, c.query, c.key_value,
+                                             c.mask.to(torch::kFloat32), weights_t),
+               c10::Error);
 }
 
 TEST(DenseAtInferenceTest, WithAGradientItIsTheModule) {
