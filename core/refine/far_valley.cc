@@ -25,20 +25,17 @@ std::optional<FarValleyMove> FarValleyAlongWeakestDirection(const Octree& source
     return std::nullopt;
   }
   const double edge = CellEdge(target, depth);
-  const Eigen::Isometry3d& at = answer.T_target_source;
-  if (StepAlongWeakestDirection(answer, edge).matrix() == at.matrix()) {
-    return std::nullopt;  // no weakest direction
-  }
+  const int half = static_cast<int>(std::lround(options.reach_cells / options.step_cells));
+  std::vector<double> steps_m;
+  for (int k = -half; k <= half; ++k) steps_m.push_back(k * options.step_cells * edge);
+  const std::vector<Eigen::Isometry3d> poses = StepsAlongWeakestDirection(answer, steps_m);
+  if (poses.empty()) return std::nullopt;  // no weakest direction
   // A source cut short (a crop) lacks one of the walls: the target's nodes it no longer covers
   // are far at every step, and the wall on that side rises elsewhere.
   const double uncovered =
-      FarNodeFractions(target, source, {at.inverse()}, depth, options.far_cells).front();
+      FarNodeFractions(target, source, {answer.T_target_source.inverse()}, depth, options.far_cells)
+          .front();
   if (!(uncovered >= 0.0 && uncovered <= options.max_uncovered_fraction)) return std::nullopt;
-  const int half = static_cast<int>(std::lround(options.reach_cells / options.step_cells));
-  std::vector<Eigen::Isometry3d> poses;
-  for (int k = -half; k <= half; ++k) {
-    poses.push_back(StepAlongWeakestDirection(answer, k * options.step_cells * edge));
-  }
   const std::vector<double> far =
       TwoWayFarNodeFractions(source, target, poses, depth, options.far_cells);
   const int n = static_cast<int>(far.size());

@@ -32,10 +32,11 @@ constexpr std::array<std::array<int, 3>, 27> kHomeFirst = [] {
 // source node under each pose (the target's lookup built once for all) and returns the cell edge; 0
 // when nothing can be measured (MeanNodeDistanceCells' negative cases). `stop_below` (metres, > 0):
 // a node's search ends at the first partner that near, and the distance visited is then that
-// partner's (enough to tell near from far; 0: the exact nearest distance). `pose_done(pose)`,
-// asked after each visit: true ends that pose's nodes there.
+// partner's (enough to tell near from far; 0: the exact nearest distance). `pose_done(pose,
+// sampled)`, asked after each visit with the number of nodes every pose samples: true ends that
+// pose's nodes there.
 struct NeverDone {
-  bool operator()(size_t) const { return false; }
+  bool operator()(size_t, size_t) const { return false; }
 };
 template <typename Visit, typename PoseDone = NeverDone>
 double VisitNodeDistances(const Octree& source, const Octree& target,
@@ -138,7 +139,7 @@ double VisitNodeDistances(const Octree& source, const Octree& target,
       const Eigen::Vector3d q = T_target_source * s.center_of_mass[node].cast<double>();
       if (!q.allFinite()) {  // a non-finite pose: no partner (and no undefined integer cast)
         visit(pose, node, cap);
-        if (pose_done(pose)) break;
+        if (pose_done(pose, used)) break;
         continue;
       }
       std::array<int64_t, 3> home;
@@ -184,7 +185,7 @@ double VisitNodeDistances(const Octree& source, const Octree& target,
         if (best2 <= stop2) break;
       }
       visit(pose, node, std::sqrt(best2));
-      if (pose_done(pose)) break;
+      if (pose_done(pose, used)) break;
     }
   }
   return edge;
@@ -236,22 +237,18 @@ std::vector<double> FarNodeFractions(const Octree& source, const Octree& target,
   const double far_distance = far_cells * CellEdge(target, depth);
   std::vector<size_t> far(poses.size(), 0);
   std::vector<size_t> nodes(poses.size(), 0);
-  // Every pose samples the same nodes: their number, for the early stop, is known beforehand
-  // (VisitNodeDistances' stride; 0 where nothing is measured, when no pose stops).
+  // The fraction only grows with the nodes still to come, so a pose past `stop_above` stays past
+  // it (the same expression as the fraction returned below, over the nodes every pose samples).
+  std::vector<uint8_t> stopped(poses.size(), 0);
   size_t sampled = 0;
-  if (std::isfinite(stop_above) && depth <= source.max_depth()) {
-    size_t n = source.level(depth).size();
-    if (options.source_nodes != nullptr) {
-      n = 0;
-      for (uint8_t marked : *options.source_nodes) n += marked != 0;
+  const bool may_stop = std::isfinite(stop_above);  // no division per node otherwise
+  auto past_bound = [&](size_t pose, size_t used) {
+    if (!may_stop || !(static_cast<double>(far[pose]) / static_cast<double>(used) > stop_above)) {
+      return false;
     }
-    sampled = std::min(n, options.max_source_nodes);
-  }
-  // The fraction only grows with the nodes still to come, so a pose past `stop_above` stays
-  // past it (the same expression as the fraction returned below).
-  auto past_bound = [&](size_t pose) {
-    return sampled > 0 &&
-           static_cast<double>(far[pose]) / static_cast<double>(sampled) > stop_above;
+    stopped[pose] = 1;
+    sampled = used;
+    return true;
   };
   const double edge = VisitNodeDistances(
       source, target, poses, depth, options,
@@ -264,7 +261,7 @@ std::vector<double> FarNodeFractions(const Octree& source, const Octree& target,
   for (size_t pose = 0; pose < poses.size(); ++pose) {
     // A pose stopped early reads its count over every sampled node: above stop_above, at most
     // its own fraction.
-    const size_t over = past_bound(pose) ? sampled : nodes[pose];
+    const size_t over = stopped[pose] ? sampled : nodes[pose];
     fractions[pose] = static_cast<double>(far[pose]) / static_cast<double>(over);
   }
   return fractions;

@@ -59,24 +59,25 @@ std::optional<WeakChamferMove> ChamferAlongWeakestDirection(const Octree& source
   if (!(answer.normalized_eigenvalues[0] >= options.min_weakest_eigenvalue)) return std::nullopt;
   const double edge = CellEdge(target, depth);
   const Eigen::Isometry3d& at = answer.T_target_source;
+  const int half = static_cast<int>(std::lround(options.reach_cells / options.step_cells));
+  std::vector<double> steps;
+  std::vector<double> steps_m;
+  for (int k = -half; k <= half; ++k) {
+    steps.push_back(k * options.step_cells);
+    steps_m.push_back(steps.back() * edge);
+  }
+  const std::vector<Eigen::Isometry3d> poses = StepsAlongWeakestDirection(answer, steps_m);
+  if (poses.empty()) return std::nullopt;  // no weakest direction
   // The direction's motion, one probe cell long: the source's nodes move from `at` to `probed`,
   // the target's (seen from the source) by the inverse motion.
   const Eigen::Isometry3d probed = StepAlongWeakestDirection(answer, edge);
-  if (probed.matrix() == at.matrix()) return std::nullopt;  // no weakest direction
   const std::vector<double> source_weights =
       CrossingWeights(source, depth, at, probed, options.line_eigenvalue_ratio);
   const std::vector<double> target_weights =
       CrossingWeights(target, depth, Eigen::Isometry3d::Identity(), at * probed.inverse(),
                       options.line_eigenvalue_ratio);
-  std::vector<double> steps;
-  std::vector<Eigen::Isometry3d> poses;
   std::vector<Eigen::Isometry3d> inverses;
-  const int half = static_cast<int>(std::lround(options.reach_cells / options.step_cells));
-  for (int k = -half; k <= half; ++k) {
-    steps.push_back(k * options.step_cells);
-    poses.push_back(StepAlongWeakestDirection(answer, k * options.step_cells * edge));
-    inverses.push_back(poses.back().inverse());
-  }
+  for (const Eigen::Isometry3d& pose : poses) inverses.push_back(pose.inverse());
   const std::vector<double> there =
       WeightedMeanNodeDistanceCells(source, target, poses, depth, source_weights);
   const std::vector<double> back =

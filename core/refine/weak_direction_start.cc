@@ -46,6 +46,16 @@ Eigen::Isometry3d StepAlongWeakestDirection(const TreeRefinementResult& answer, 
   return Step(answer, weakest.direction, step_m);
 }
 
+std::vector<Eigen::Isometry3d> StepsAlongWeakestDirection(const TreeRefinementResult& answer,
+                                                          const std::vector<double>& steps_m) {
+  std::vector<Eigen::Isometry3d> poses;
+  const WeakestDirection weakest = FindWeakestDirection(answer);
+  if (!weakest.found) return poses;
+  poses.reserve(steps_m.size());
+  for (double step_m : steps_m) poses.push_back(Step(answer, weakest.direction, step_m));
+  return poses;
+}
+
 std::optional<WeakDirectionStart> BestWeakDirectionStart(const Octree& source, const Octree& target,
                                                          const TreeRefinementResult& answer,
                                                          int depth,

@@ -74,6 +74,12 @@ struct WeakDirectionStart {
 // information is empty.
 Eigen::Isometry3d StepAlongWeakestDirection(const TreeRefinementResult& answer, double step_m);
 
+// StepAlongWeakestDirection for each of `steps_m`, with one eigen-decomposition of the information
+// for all (a search along the direction asks for dozens of steps); empty where the information
+// has no weakest direction.
+std::vector<Eigen::Isometry3d> StepsAlongWeakestDirection(const TreeRefinementResult& answer,
+                                                          const std::vector<double>& steps_m);
+
 // The step (options.steps_cells, both signs) whose two-way far fraction at `depth` is least, when
 // it is at least min_far_fraction_drop below the answer's; nullopt otherwise, when the information
 // has no direction to step along, or when nothing can be measured at `depth`.

@@ -73,6 +73,15 @@ TEST(WeakDirectionStartTest, TheStepMovesAlongTheLeastConstrainedDirectionByItsL
   TreeRefinementResult empty = spring.at_truth;
   empty.information.setZero();
   EXPECT_TRUE(StepAlongWeakestDirection(empty, 0.05).isApprox(empty.T_target_source, 1e-12));
+  // Several steps at once are each step alone, and none without information.
+  const std::vector<double> steps = {0.01, -0.02, 0.0, 0.05};
+  const std::vector<Eigen::Isometry3d> stepped = StepsAlongWeakestDirection(spring.at_truth, steps);
+  ASSERT_EQ(stepped.size(), steps.size());
+  for (size_t k = 0; k < steps.size(); ++k) {
+    EXPECT_EQ(stepped[k].matrix(), StepAlongWeakestDirection(spring.at_truth, steps[k]).matrix())
+        << steps[k];
+  }
+  EXPECT_TRUE(StepsAlongWeakestDirection(empty, steps).empty());
 }
 
 TEST(WeakDirectionStartTest, ASpringSteppedOffAlongItsScrewIsSteppedBack) {
