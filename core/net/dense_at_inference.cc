@@ -11,21 +11,29 @@ namespace rpsr::core::net {
 
 namespace {
 
+// A fresh [rows, out] tensor whose rows each hold bias[first, first + out); zeros without a bias.
+torch::Tensor RowsOfBias(const torch::Tensor& bias, int64_t first, int64_t rows, int64_t out,
+                         const torch::TensorOptions& options) {
+  torch::Tensor y = torch::empty({rows, out}, options);
+  float* yp = y.data_ptr<float>();
+  if (!bias.defined()) {
+    std::fill_n(yp, rows * out, 0.0f);
+    return y;
+  }
+  const torch::Tensor b = bias.detach().contiguous();
+  const float* bp = b.data_ptr<float>() + first;
+  for (int64_t r = 0; r < rows; ++r) std::copy(bp, bp + out, yp + r * out);
+  return y;
+}
+
 // rows x [rows, in] (contiguous) times columns [col, col + out) of weight_t [in, ldb] plus
 // bias[col, col + out): a fresh [rows, out] tensor.
 torch::Tensor DenseByKernel(const torch::Tensor& x, const torch::Tensor& weight_t, int64_t col,
                             int64_t out, const torch::Tensor& bias) {
   const int64_t in = x.size(-1);
   const int64_t rows = x.numel() / std::max<int64_t>(in, 1);
-  torch::Tensor y = torch::empty({rows, out}, x.options());
+  torch::Tensor y = RowsOfBias(bias, col, rows, out, x.options());
   float* yp = y.data_ptr<float>();
-  if (bias.defined()) {
-    const torch::Tensor b = bias.detach().contiguous();
-    const float* bp = b.data_ptr<float>() + col;
-    for (int64_t r = 0; r < rows; ++r) std::copy(bp, bp + out, yp + r * out);
-  } else {
-    std::fill_n(yp, rows * out, 0.0f);
-  }
   if (rows > 0 && in > 0) {
     DenseAddProducts(x.data_ptr<float>(), in, rows, weight_t.data_ptr<float>() + col,
                      weight_t.size(1), out, yp);
@@ -40,17 +48,11 @@ torch::Tensor DenseByKernel(const torch::Tensor& x, const torch::Tensor& weight_
 torch::Tensor DenseByBlas(const float* x, int64_t rows, int64_t in, const torch::Tensor& weight,
                           int64_t row, int64_t out, const torch::Tensor& bias,
                           const torch::TensorOptions& options) {
-  torch::Tensor y = torch::empty({rows, out}, options);
-  float* yp = y.data_ptr<float>();
-  float beta = 0.0f;
-  if (bias.defined()) {
-    const torch::Tensor b = bias.detach().contiguous();
-    const float* bp = b.data_ptr<float>() + row;
-    for (int64_t r = 0; r < rows; ++r) std::copy(bp, bp + out, yp + r * out);
-    beta = 1.0f;
-  }
+  torch::Tensor y = RowsOfBias(bias, row, rows, out, options);
+  // Without a bias the zeros are not read (beta 0), as torch::mm computes it.
   SgemmRowMajor(/*trans_a=*/false, /*trans_b=*/true, rows, out, in, 1.0f, x, in,
-                weight.data_ptr<float>() + row * in, in, beta, yp, out);
+                weight.data_ptr<float>() + row * in, in, bias.defined() ? 1.0f : 0.0f,
+                y.data_ptr<float>(), out);
   return y;
 }
 
